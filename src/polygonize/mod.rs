@@ -1,0 +1,18 @@
+//! Polygonization: extract the zero set of a scalar field as a closed triangle mesh.
+//!
+//! Works on any [`ScalarField`] (it knows nothing of RBFs). Convention: `f < 0` inside,
+//! `f > 0` outside, so the gradient points outwards and triangles are wound counter-clockwise
+//! seen from outside.
+
+use crate::geometry::{Aabb, Point3};
+
+/// A scalar field in normalised units whose zero set is the surface.
+pub trait ScalarField: Sync {
+    /// `f(p)`: negative inside, positive outside.
+    fn value(&self, p: &Point3) -> f64;
+    /// `∇f(p)` (points outwards on the surface).
+    fn gradient(&self, p: &Point3) -> Point3;
+    /// Conservative test: returns `false` only when the zero set certainly does not meet `cell`
+    /// (so the polygonizer may skip it). Returning `true` always is correct but slow.
+    fn may_contain_zero(&self, cell: &Aabb) -> bool;
+}
