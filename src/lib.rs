@@ -2,9 +2,23 @@
 //!
 //! Watertight triangle meshes from point clouds with compactly supported radial basis functions
 //! (Kojekine, Savchenko, Berzin & Hagiwara: carrier solid + Wendland CSRBF spline).
+//!
+//! Entry point: [`pipeline::reconstruct`] takes a [`geometry::PointCloud`] and [`params::ReconParams`]
+//! and returns the mesh (input units) and a [`report::Report`]. Each stage is its own module:
+//! [`geometry`] (types, cleaning, normalisation), [`spatial`] (octree, k-d tree), [`rbf`] (kernels,
+//! carriers, assembly, field), [`ordering`], [`linalg`], [`polygonize`], [`mesh`], [`io`].
 #![warn(missing_docs)]
 
+pub mod error;
 pub mod geometry;
 pub mod linalg;
+pub mod params;
+pub mod pipeline;
 pub mod polygonize;
 pub mod progress;
+pub mod rbf;
+pub mod report;
+
+pub use error::ReconError;
+pub use params::ReconParams;
+pub use pipeline::{Reconstruction, reconstruct};

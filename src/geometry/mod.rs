@@ -6,6 +6,9 @@
 
 mod aabb;
 mod normalize;
+pub mod clean;
+pub mod pca;
+pub mod synthetic;
 
 pub use aabb::Aabb;
 pub use normalize::Normalization;

@@ -1,0 +1,41 @@
+//! The library's top-level error: one variant per stage, each wrapping that stage's own error.
+
+/// Anything that can stop a reconstruction.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReconError {
+    /// A parameter is out of range.
+    #[error(transparent)]
+    Params(#[from] crate::params::ParamError),
+    /// The cloud cannot be reconstructed (empty, degenerate, ...).
+    #[error(transparent)]
+    Input(#[from] crate::geometry::clean::InputError),
+    /// Support choice, assembly or carrier fitting failed.
+    #[error(transparent)]
+    Rbf(#[from] crate::rbf::RbfError),
+    /// Ordering failed.
+    #[error(transparent)]
+    Ordering(#[from] crate::ordering::OrderingError),
+    /// Factorisation or solve failed.
+    #[error(transparent)]
+    Linalg(#[from] crate::linalg::LinalgError),
+    /// Mesh extraction failed.
+    #[error(transparent)]
+    Polygonize(#[from] crate::polygonize::PolygonizeError),
+    /// The caller cancelled.
+    #[error("cancelled")]
+    Cancelled,
+}
+
+impl From<crate::rbf::CarrierError> for ReconError {
+    fn from(e: crate::rbf::CarrierError) -> Self {
+        ReconError::Rbf(e.into())
+    }
+}
+
+impl ReconError {
+    /// True when the input data (not the parameters or the machine) is at fault: the HTTP API answers 422.
+    pub fn is_input_problem(&self) -> bool {
+        matches!(self, ReconError::Input(_) | ReconError::Rbf(crate::rbf::RbfError::Carrier(_)))
+    }
+}

@@ -1,0 +1,191 @@
+//! Input cleaning: drop non-finite points, merge duplicates, reject degenerate clouds.
+//!
+//! Duplicates: a point is dropped when an earlier point (lower index) lies within `tolerance`
+//! (relative to the bbox diagonal) — deterministic, parallel, `O(n log n)`. Degeneracy is judged
+//! by PCA after cleaning: collinear clouds are refused; coplanar ones need normals.
+
+use super::pca::pca;
+use super::{Aabb, Point3, PointCloud, normalized};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+/// Cleaning parameters.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CleanParams {
+    /// Points closer than this fraction of the bbox diagonal are merged (default 1e-6).
+    pub merge_tolerance: f64,
+}
+
+impl Default for CleanParams {
+    fn default() -> Self {
+        CleanParams { merge_tolerance: 1e-6 }
+    }
+}
+
+/// What cleaning did (report `input` section).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct CleanStats {
+    /// Points read.
+    pub points: usize,
+    /// Points kept.
+    pub used: usize,
+    /// Points with a NaN or infinite coordinate.
+    pub dropped_non_finite: usize,
+    /// Points merged into an earlier duplicate.
+    pub merged_duplicates: usize,
+    /// Whether normals are used.
+    pub has_normals: bool,
+    /// Points whose normal was zero or non-finite (kept as positions; their normal is ignored).
+    pub invalid_normals: usize,
+}
+
+/// Why a cloud cannot be reconstructed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum InputError {
+    /// No points at all.
+    #[error("the input holds no points")]
+    Empty,
+    /// Every point had a NaN/inf coordinate.
+    #[error("all {total} points have NaN or infinite coordinates; nothing is left to reconstruct")]
+    NoFinitePoints {
+        /// Points read.
+        total: usize,
+    },
+    /// Fewer than 4 distinct points.
+    #[error("only {distinct} distinct point(s) after cleaning; a surface needs at least 4 points not in one plane")]
+    TooFewPoints {
+        /// Distinct finite points.
+        distinct: usize,
+    },
+    /// All points on a line.
+    #[error("all {n} points lie on a straight line: no surface passes through them; scan more than one line")]
+    Collinear {
+        /// Point count.
+        n: usize,
+    },
+    /// All points in a plane and no normals.
+    #[error(
+        "all {n} points lie in one plane: without normals the inside and outside are undefined; give points with normals (PLY nx ny nz or 6-column XYZ)"
+    )]
+    Coplanar {
+        /// Point count.
+        n: usize,
+    },
+}
+
+/// Clean `cloud`: returns the kept points (input units), unit normals (zero vectors where invalid)
+/// and statistics.
+pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointCloud, CleanStats), InputError> {
+    let total = cloud.points.len();
+    if total == 0 {
+        return Err(InputError::Empty);
+    }
+    let finite: Vec<usize> = (0..total).filter(|&i| cloud.points[i].iter().all(|v| v.is_finite())).collect();
+    if finite.is_empty() {
+        return Err(InputError::NoFinitePoints { total });
+    }
+    let pts: Vec<Point3> = finite.iter().map(|&i| cloud.points[i]).collect();
+    let tol = params.merge_tolerance * Aabb::from_points(&pts).diagonal();
+    let keep: Vec<bool> = if tol > 0.0 {
+        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts);
+        (0..pts.len())
+            .into_par_iter()
+            .map(|i| {
+                let hits = tree.query(&pts[i]).within::<SquaredEuclidean<f64>>(tol * tol).unsorted().execute();
+                !hits.iter().any(|h| (h.item as usize) < i)
+            })
+            .collect()
+    } else {
+        vec![true; pts.len()]
+    };
+    let kept: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
+    let points: Vec<Point3> = kept.iter().map(|&k| pts[k]).collect();
+    let mut invalid_normals = 0;
+    let normals = cloud.normals.as_ref().filter(|n| n.len() == total).map(|n| {
+        kept.iter()
+            .map(|&k| {
+                normalized(n[finite[k]]).unwrap_or_else(|| {
+                    invalid_normals += 1;
+                    [0.0; 3]
+                })
+            })
+            .collect::<Vec<_>>()
+    });
+    let normals = normals.filter(|_| invalid_normals < kept.len());
+    let stats = CleanStats {
+        points: total,
+        used: points.len(),
+        dropped_non_finite: total - finite.len(),
+        merged_duplicates: finite.len() - points.len(),
+        has_normals: normals.is_some(),
+        invalid_normals: if normals.is_some() { invalid_normals } else { 0 },
+    };
+    check_degenerate(&points, normals.is_some())?;
+    Ok((PointCloud { points, normals }, stats))
+}
+
+/// Refuse clouds with fewer than 4 points, collinear clouds, and coplanar clouds without normals.
+pub fn check_degenerate(points: &[Point3], has_normals: bool) -> Result<(), InputError> {
+    let n = points.len();
+    if n < 4 {
+        return Err(InputError::TooFewPoints { distinct: n });
+    }
+    let p = pca(points);
+    let l0 = p.variances[0].max(f64::MIN_POSITIVE);
+    if p.variances[1].max(0.0).sqrt() <= 1e-7 * l0.sqrt() {
+        return Err(InputError::Collinear { n });
+    }
+    if !has_normals && p.variances[2].max(0.0).sqrt() <= 1e-7 * l0.sqrt() {
+        return Err(InputError::Coplanar { n });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cloud(points: Vec<Point3>) -> PointCloud {
+        PointCloud { points, normals: None }
+    }
+
+    #[test]
+    fn non_finite_points_are_dropped_and_duplicates_merged() {
+        let mut p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        p.push([f64::NAN, 0.0, 0.0]);
+        p.push([1.0, 0.0, f64::INFINITY]);
+        p.push([1.0, 0.0, 0.0]);
+        p.push([1.0 + 1e-9, 0.0, 0.0]);
+        let (c, s) = clean_cloud(&cloud(p), &CleanParams::default()).unwrap();
+        assert_eq!(s.points, 8);
+        assert_eq!(s.dropped_non_finite, 2);
+        assert_eq!(s.merged_duplicates, 2);
+        assert_eq!(c.points.len(), 4);
+        assert_eq!(s.used, 4);
+    }
+
+    #[test]
+    fn degenerate_clouds_are_refused_with_the_reason() {
+        assert!(matches!(clean_cloud(&cloud(vec![]), &CleanParams::default()), Err(InputError::Empty)));
+        let nan = cloud(vec![[f64::NAN; 3]; 3]);
+        assert!(matches!(clean_cloud(&nan, &CleanParams::default()), Err(InputError::NoFinitePoints { total: 3 })));
+        let dup = cloud(vec![[1.0; 3]; 10]);
+        assert!(matches!(clean_cloud(&dup, &CleanParams::default()), Err(InputError::TooFewPoints { distinct: 1 })));
+        let line = cloud((0..20).map(|i| [i as f64, 2.0 * i as f64, 1.0]).collect());
+        assert!(matches!(clean_cloud(&line, &CleanParams::default()), Err(InputError::Collinear { n: 20 })));
+        let plane: Vec<Point3> = (0..100).map(|i| [(i % 10) as f64, (i / 10) as f64, 3.0]).collect();
+        assert!(matches!(clean_cloud(&cloud(plane.clone()), &CleanParams::default()), Err(InputError::Coplanar { .. })));
+        let with_normals = PointCloud { normals: Some(vec![[0.0, 0.0, 1.0]; 100]), points: plane };
+        assert!(clean_cloud(&with_normals, &CleanParams::default()).is_ok());
+    }
+
+    #[test]
+    fn invalid_normals_are_counted() {
+        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let n = vec![[0.0, 0.0, 2.0], [0.0; 3], [f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let (c, s) = clean_cloud(&PointCloud { points: p, normals: Some(n) }, &CleanParams::default()).unwrap();
+        assert_eq!(s.invalid_normals, 2);
+        assert_eq!(c.normals.unwrap()[0], [0.0, 0.0, 1.0]);
+    }
+}

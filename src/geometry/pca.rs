@@ -1,0 +1,124 @@
+//! Principal component analysis of point sets: centroid, covariance, and the eigen-decomposition of a
+//! symmetric 3×3 matrix by cyclic Jacobi rotations (exact to rounding, no external solver).
+
+use super::Point3;
+
+/// Centroid and principal axes of a point set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pca {
+    /// Mean of the points.
+    pub centroid: Point3,
+    /// Eigenvalues of the covariance (variance along each axis, squared units), descending.
+    pub variances: [f64; 3],
+    /// Unit eigenvectors matching `variances` (`axes[k]` is the k-th principal direction).
+    pub axes: [Point3; 3],
+}
+
+/// PCA of `points` (at least one point). Covariance is normalised by the point count.
+pub fn pca(points: &[Point3]) -> Pca {
+    let n = points.len().max(1) as f64;
+    let mut c = [0.0; 3];
+    for p in points {
+        for k in 0..3 {
+            c[k] += p[k];
+        }
+    }
+    let centroid = [c[0] / n, c[1] / n, c[2] / n];
+    let mut m = [[0.0; 3]; 3];
+    for p in points {
+        let d = [p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]];
+        for a in 0..3 {
+            for b in 0..3 {
+                m[a][b] += d[a] * d[b];
+            }
+        }
+    }
+    for row in &mut m {
+        for v in row.iter_mut() {
+            *v /= n;
+        }
+    }
+    let (variances, axes) = symmetric_eigen3(m);
+    Pca { centroid, variances, axes }
+}
+
+/// Eigenvalues (descending) and unit eigenvectors of a symmetric 3×3 matrix.
+pub fn symmetric_eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point3; 3]) {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..64 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let diag = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= f64::EPSILON * diag * 1e-3 || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            for k in 0..3 {
+                let akp = a[k][p];
+                let akq = a[k][q];
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let apk = a[p][k];
+                let aqk = a[q][k];
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in &mut v {
+                let vp = row[p];
+                let vq = row[q];
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let mut idx = [0usize, 1, 2];
+    idx.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
+    let vals = [a[idx[0]][idx[0]], a[idx[1]][idx[1]], a[idx[2]][idx[2]]];
+    let col = |j: usize| [v[0][j], v[1][j], v[2][j]];
+    (vals, [col(idx[0]), col(idx[1]), col(idx[2])])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{cross, dot, norm};
+
+    #[test]
+    fn eigen_decomposition_reconstructs_the_matrix() {
+        let m = [[4.0, 1.0, -2.0], [1.0, 3.0, 0.5], [-2.0, 0.5, 1.0]];
+        let (l, v) = symmetric_eigen3(m);
+        assert!(l[0] >= l[1] && l[1] >= l[2]);
+        for a in 0..3 {
+            for b in 0..3 {
+                let r: f64 = (0..3).map(|k| l[k] * v[k][a] * v[k][b]).sum();
+                assert!((r - m[a][b]).abs() < 1e-12, "{a}{b}: {r} vs {}", m[a][b]);
+            }
+            assert!((norm(v[a]) - 1.0).abs() < 1e-12);
+        }
+        assert!(dot(v[0], v[1]).abs() < 1e-12);
+        assert!((norm(cross(v[0], v[1])) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pca_of_planar_points_has_zero_third_variance() {
+        let pts: Vec<Point3> = (0..50)
+            .map(|i| {
+                let t = i as f64 * 0.37;
+                [t.cos() * 2.0, t.sin(), 0.0]
+            })
+            .map(|p| [p[0] + 1.0, p[1] * 0.6 + p[0] * 0.8, p[1] * 0.8 - p[0] * 0.6])
+            .collect();
+        let r = pca(&pts);
+        assert!(r.variances[2].abs() < 1e-12 * r.variances[0]);
+        assert!(r.variances[1] > 0.1);
+    }
+}

@@ -1,0 +1,83 @@
+//! Choosing the support radius `R`: given directly, or from a target neighbour count `K`
+//! (median distance to the K-th nearest neighbour over a sample of points), plus an estimate of
+//! the matrix size it implies, computed before anything large is allocated.
+
+use crate::geometry::Point3;
+use crate::spatial::SpatialIndex;
+
+/// How the support radius is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Support {
+    /// Support radius `R` in normalised units (the input's longest bbox edge is 1).
+    Radius(f64),
+    /// Choose `R` so that a point has about this many neighbours within `R`.
+    Neighbours(usize),
+}
+
+impl Default for Support {
+    fn default() -> Self {
+        Support::Neighbours(30)
+    }
+}
+
+/// The resolved radius and the neighbourhood statistics measured on a sample.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SupportEstimate {
+    /// Support radius, normalised units.
+    pub radius: f64,
+    /// Mean number of points within `radius` of a sampled point (itself included).
+    pub mean_neighbours: f64,
+    /// Estimated non-zeros of the full symmetric matrix (`n · mean_neighbours`).
+    pub estimated_nnz: f64,
+    /// Median distance to the nearest other point (the sampling spacing), normalised units.
+    pub spacing: f64,
+}
+
+/// Resolve `support` on `points` (sampling at most ~2000 of them; `O(s log n)`).
+pub fn estimate_support(points: &[Point3], index: &dyn SpatialIndex, support: Support) -> Result<SupportEstimate, super::RbfError> {
+    let n = points.len();
+    let step = (n / 2000).max(1);
+    let sample: Vec<&Point3> = points.iter().step_by(step).collect();
+    let mut knn = Vec::new();
+    let mut spacing: Vec<f64> = Vec::with_capacity(sample.len());
+    let mut kth: Vec<f64> = Vec::with_capacity(sample.len());
+    let k = match support {
+        Support::Neighbours(k) => k.clamp(1, n),
+        Support::Radius(_) => 2.min(n),
+    };
+    for p in &sample {
+        index.nearest_k(p, k.max(2).min(n), &mut knn);
+        if knn.len() > 1 {
+            spacing.push(knn[1].1);
+        }
+        if let Some(last) = knn.get(k.saturating_sub(1)).or(knn.last()) {
+            kth.push(last.1);
+        }
+    }
+    let radius = match support {
+        Support::Radius(r) => r,
+        Support::Neighbours(_) => median(&mut kth) * 1.0001,
+    };
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(super::RbfError::BadSupport(radius));
+    }
+    let mut within = Vec::new();
+    let total: usize = sample
+        .iter()
+        .map(|p| {
+            index.within(p, radius, &mut within);
+            within.len()
+        })
+        .sum();
+    let mean_neighbours = total as f64 / sample.len().max(1) as f64;
+    Ok(SupportEstimate { radius, mean_neighbours, estimated_nnz: mean_neighbours * n as f64, spacing: median(&mut spacing) })
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}

@@ -1,0 +1,147 @@
+//! The JSON report of a reconstruction (keys are a contract, see README "Report").
+
+use crate::geometry::clean::CleanStats;
+use crate::mesh::topology::MeshTopology;
+use serde::Serialize;
+
+/// Full report of one reconstruction.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// What was read and kept.
+    pub input: CleanStats,
+    /// The parameters actually used (resolved defaults).
+    pub params: ParamsReport,
+    /// Size and shape of the linear system.
+    pub matrix: MatrixReport,
+    /// Residual of the final field at the data points, normalised units.
+    pub residual: ResidualReport,
+    /// Topology of the output mesh.
+    pub mesh: MeshTopology,
+    /// Wall-clock seconds per stage.
+    pub timings_s: Timings,
+    /// Memory use.
+    pub memory: MemoryReport,
+    /// Polygonization statistics (sparse grid).
+    pub polygonize: PolygonizeReport,
+}
+
+/// Resolved parameters.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamsReport {
+    /// Always `csrbf` for this pipeline.
+    pub method: &'static str,
+    /// Kernel name.
+    pub kernel: String,
+    /// Support radius, normalised units.
+    pub support: f64,
+    /// Support radius, input units.
+    pub support_input_units: f64,
+    /// Mean neighbours per point within the support.
+    pub neighbours: f64,
+    /// Carrier actually fitted (`auto` resolved).
+    pub carrier: String,
+    /// Ordering name.
+    pub ordering: String,
+    /// Solver name.
+    pub solver: String,
+    /// Polynomial name.
+    pub polynomial: String,
+    /// Grid cells along the longest axis.
+    pub resolution: usize,
+    /// Spatial index name.
+    pub index: String,
+    /// Whether input normals were flipped because they pointed inwards.
+    pub normals_flipped: bool,
+}
+
+/// Linear system statistics (seed Table 1 columns).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct MatrixReport {
+    /// Unknowns (points).
+    pub n: usize,
+    /// Stored non-zeros of the full symmetric matrix.
+    pub nnz: usize,
+    /// Bandwidth under the chosen ordering.
+    pub bandwidth: usize,
+    /// Envelope (profile) values of the lower triangle incl. diagonal under the chosen ordering.
+    pub profile_values: usize,
+    /// Values of a dense `n × n` matrix.
+    pub dense_values: usize,
+    /// Values stored by the factor actually computed.
+    pub factor_values: usize,
+}
+
+/// RMS and maximum of `|f(P_i)|`.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct ResidualReport {
+    /// Root mean square, normalised units.
+    pub rms: f64,
+    /// Maximum absolute value, normalised units.
+    pub max: f64,
+}
+
+/// Seconds per stage (`read` and `write` are filled by the caller that does the I/O).
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Timings {
+    /// Reading the input file.
+    pub read: f64,
+    /// Cleaning and normalising.
+    pub clean: f64,
+    /// Building the spatial index and choosing the support.
+    pub index: f64,
+    /// Fitting the carrier and computing offsets.
+    pub carrier: f64,
+    /// Assembling the matrix.
+    pub assemble: f64,
+    /// Computing the ordering and matrix shape.
+    pub order: f64,
+    /// Factorising.
+    pub factor: f64,
+    /// Solving (and the polynomial border).
+    pub solve: f64,
+    /// Residual at the data points.
+    pub residual: f64,
+    /// Marching the grid.
+    pub polygonize: f64,
+    /// Topology analysis and GPU optimisation.
+    pub post: f64,
+    /// Writing the output.
+    pub write: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// Memory statistics.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct MemoryReport {
+    /// Peak resident set size of the process, MiB (Linux VmHWM; 0 where unknown).
+    pub peak_rss_mib: f64,
+}
+
+/// Sparse-grid statistics.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct PolygonizeReport {
+    /// Cells of the full grid.
+    pub cells_total: u64,
+    /// Blocks of the full grid.
+    pub blocks_total: usize,
+    /// Blocks the field could cross zero in (the only ones evaluated).
+    pub blocks_active: usize,
+    /// Field evaluations.
+    pub field_evaluations: u64,
+    /// Grid cell edge, normalised units.
+    pub cell_size: f64,
+}
+
+/// Peak resident set size of this process in MiB (reads `/proc/self/status`; 0 elsewhere).
+pub fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
