@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod geometry;
+pub mod io;
 pub mod linalg;
 pub mod polygonize;
 pub mod progress;
