@@ -106,7 +106,10 @@ pub enum MeshFormat {
 impl MeshFormat {
     /// Output format from the extension of `path` (`.glb`, `.ply`, `.obj`, case-insensitive).
     pub fn from_path(path: &Path) -> Result<MeshFormat, IoError> {
-        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
         match ext.as_deref() {
             Some("glb") => Ok(MeshFormat::Glb),
             Some("ply") => Ok(MeshFormat::Ply),
@@ -224,7 +227,10 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh, IoError> {
             what: "file is empty".into(),
         });
     }
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     let head = bytes.trim_ascii_start();
     if bytes.starts_with(b"glTF") || ext.as_deref() == Some("glb") {
         glb::decode_glb_named(&bytes, path)
@@ -331,14 +337,29 @@ mod tests {
 
     #[test]
     fn extension_and_sniffing() {
-        assert_eq!(PointFormat::from_path(Path::new("a.PLY")), Some(PointFormat::Ply));
-        assert_eq!(PointFormat::from_path(Path::new("a.txt")), Some(PointFormat::Xyz));
+        assert_eq!(
+            PointFormat::from_path(Path::new("a.PLY")),
+            Some(PointFormat::Ply)
+        );
+        assert_eq!(
+            PointFormat::from_path(Path::new("a.txt")),
+            Some(PointFormat::Xyz)
+        );
         assert_eq!(PointFormat::from_path(Path::new("a.bin")), None);
-        assert_eq!(PointFormat::sniff(b"ply\nformat ascii 1.0\n"), Some(PointFormat::Ply));
-        assert_eq!(PointFormat::sniff(b"# c\nv 1 2 3\n"), Some(PointFormat::Obj));
+        assert_eq!(
+            PointFormat::sniff(b"ply\nformat ascii 1.0\n"),
+            Some(PointFormat::Ply)
+        );
+        assert_eq!(
+            PointFormat::sniff(b"# c\nv 1 2 3\n"),
+            Some(PointFormat::Obj)
+        );
         assert_eq!(PointFormat::sniff(b"1 2 3\n"), Some(PointFormat::Xyz));
         assert_eq!(PointFormat::sniff(&[0u8, 1, 2, 200, 7]), None);
-        assert_eq!(MeshFormat::from_path(Path::new("m.GLB")).unwrap(), MeshFormat::Glb);
+        assert_eq!(
+            MeshFormat::from_path(Path::new("m.GLB")).unwrap(),
+            MeshFormat::Glb
+        );
         assert!(matches!(
             MeshFormat::from_path(Path::new("m.stl")),
             Err(IoError::UnknownFormat { .. })
@@ -374,9 +395,22 @@ mod tests {
 
         let big = dir.path().join("big.xyz");
         std::fs::write(&big, "1 2 3\n".repeat(100)).unwrap();
-        let small = ReadLimits { max_points: 10, max_bytes: 64 };
+        let small = ReadLimits {
+            max_points: 10,
+            max_bytes: 64,
+        };
         let e = read_point_cloud(&big, &small).unwrap_err();
-        assert!(matches!(e, IoError::TooLarge { bytes: 600, limit: 64, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                IoError::TooLarge {
+                    bytes: 600,
+                    limit: 64,
+                    ..
+                }
+            ),
+            "{e}"
+        );
     }
 
     #[cfg(unix)]

@@ -63,7 +63,9 @@ pub(crate) fn read_obj_mesh(
         });
     }
     let normals = if d.vn.len() == n && d.normals_follow_vertices {
-        d.vn.into_iter().map(|v| normalized(v).unwrap_or([0.0; 3])).collect()
+        d.vn.into_iter()
+            .map(|v| normalized(v).unwrap_or([0.0; 3]))
+            .collect()
     } else {
         Vec::new()
     };
@@ -104,7 +106,8 @@ fn parse(bytes: &[u8], limits: &ReadLimits, src: &Path, want: Want) -> Result<Ob
             Some(b"f") if want == Want::Mesh => {
                 poly.clear();
                 for t in toks {
-                    let (vi, ni) = corner(t, d.v.len(), d.vn.len()).map_err(|m| perr(line_no, m))?;
+                    let (vi, ni) =
+                        corner(t, d.v.len(), d.vn.len()).map_err(|m| perr(line_no, m))?;
                     if ni.is_some_and(|n| n != vi) {
                         d.normals_follow_vertices = false;
                     }
@@ -163,4 +166,59 @@ fn resolve(t: &[u8], count: usize) -> Result<Option<u32>, String> {
     u32::try_from(abs)
         .map(Some)
         .map_err(|_| format!("index {i} is out of range ({count} defined so far)"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::{PointFormat, parse_point_cloud};
+
+    const SRC: &str = "# cube corner\nv 0 0 0\nv 1 0 0 1.0\nv 1 1 0 0.5 0.5 0.5\nv 0 1 0\nvn 0 0 2\nvn 0 0 1\nvn 0 0 1\nvn 0 0 1\nvt 0 0\ng quad\nf 1//1 2//2 3//3 4//4\nf -4 -2 -1\nl 1 2\n";
+
+    #[test]
+    fn points_with_normals_only_when_counts_match() {
+        let pc =
+            parse_point_cloud(SRC.as_bytes(), PointFormat::Obj, &ReadLimits::default()).unwrap();
+        assert_eq!(pc.points[2], [1.0, 1.0, 0.0]);
+        assert_eq!(pc.normals.as_ref().map(Vec::len), Some(4));
+        let fewer = SRC.replace("vn 0 0 2\n", "");
+        let pc =
+            parse_point_cloud(fewer.as_bytes(), PointFormat::Obj, &ReadLimits::default()).unwrap();
+        assert!(pc.normals.is_none());
+        let e =
+            parse_point_cloud(b"v 1 2\n", PointFormat::Obj, &ReadLimits::default()).unwrap_err();
+        assert!(matches!(e, IoError::Parse { line: 1, .. }), "{e}");
+    }
+
+    #[test]
+    fn mesh_faces_all_corner_forms() {
+        let m = read_obj_mesh(SRC.as_bytes(), &ReadLimits::default(), Path::new("c.obj")).unwrap();
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 2, 3]]);
+        assert_eq!(
+            m.normals[0],
+            [0.0, 0.0, 1.0],
+            "normals are made unit length"
+        );
+        let forms = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1 2/1/1 3//1\n";
+        let m =
+            read_obj_mesh(forms.as_bytes(), &ReadLimits::default(), Path::new("f.obj")).unwrap();
+        assert_eq!(m.triangles, vec![[0, 1, 2]]);
+        assert!(m.normals.is_empty(), "#vn != #v");
+        for bad in [
+            "v 0 0 0\nf 1 2 0\n",
+            "v 0 0 0\nf 1 -2 1\n",
+            "v 0 0 0\nf 1 a 1\n",
+        ] {
+            let e = read_obj_mesh(bad.as_bytes(), &ReadLimits::default(), Path::new("b.obj"))
+                .unwrap_err();
+            assert!(matches!(e, IoError::Parse { line: 2, .. }), "{bad}: {e}");
+        }
+        let e = read_obj_mesh(
+            b"v 0 0 0\nf 1 2 3\n",
+            &ReadLimits::default(),
+            Path::new("b.obj"),
+        )
+        .unwrap_err();
+        assert!(matches!(e, IoError::Invalid { .. }), "{e}");
+    }
 }

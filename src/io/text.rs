@@ -121,7 +121,11 @@ impl Sink<'_> {
 
     fn push_row(&mut self, toks: &[&[u8]], c: &Columns, line: usize) -> Result<(), IoError> {
         if toks.len() < c.min_tokens() {
-            let msg = format!("expected at least {} columns, found {}", c.min_tokens(), toks.len());
+            let msg = format!(
+                "expected at least {} columns, found {}",
+                c.min_tokens(),
+                toks.len()
+            );
             return Err(self.err(line, msg));
         }
         if self.points.len() >= self.limits.max_points {
@@ -226,4 +230,92 @@ pub(crate) fn read_text_points(
         points: sink.points,
         normals: has_normals.then_some(sink.normals),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::parse_point_cloud;
+
+    fn read(s: &str, f: PointFormat) -> Result<PointCloud, IoError> {
+        parse_point_cloud(s.as_bytes(), f, &ReadLimits::default())
+    }
+
+    #[test]
+    fn csv_header_in_another_order() {
+        let pc = read(
+            "nz;x;ny;y;z;nx;intensity\n3;1;2;4;5;1;9\r\n-3;0.5;-2;6;7;-1;9\n",
+            PointFormat::Csv,
+        )
+        .unwrap();
+        assert_eq!(pc.points, vec![[1.0, 4.0, 5.0], [0.5, 6.0, 7.0]]);
+        assert_eq!(pc.normals, Some(vec![[1.0, 2.0, 3.0], [-1.0, -2.0, -3.0]]));
+        let pc = read("\"X\",\"Y\",\"Z\"\n1,2,3\n", PointFormat::Csv).unwrap();
+        assert_eq!(pc.points, vec![[1.0, 2.0, 3.0]]);
+        let pc = read("//X,Y,Z,Nx,Ny,Nz\n1,2,3,0,0,1\n", PointFormat::Csv).unwrap();
+        assert_eq!(pc.normals, Some(vec![[0.0, 0.0, 1.0]]));
+    }
+
+    #[test]
+    fn column_count_rules() {
+        let six = read("1 2 3 0 0 1\n4 5 6 0 1 0\n", PointFormat::Xyz).unwrap();
+        assert_eq!(six.normals, Some(vec![[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]));
+        for row in ["1 2 3", "1 2 3 0.5", "1 2 3 9 255 0 0", "1,2,3,4,5,6,7,8,9"] {
+            let pc = read(&format!("{row}\n{row}\n"), PointFormat::Xyz).unwrap();
+            assert_eq!(pc.points, vec![[1.0, 2.0, 3.0]; 2], "{row}");
+            assert!(pc.normals.is_none(), "{row}");
+        }
+    }
+
+    #[test]
+    fn pts_count_line_comments_and_non_finite() {
+        let pc = read(
+            "3\n# comment\n\n1 2 3 10 255 0 0\nnan 2 3 1 1 1 1\n1 inf -inf 1 1 1 1\n",
+            PointFormat::Pts,
+        )
+        .unwrap();
+        assert_eq!(pc.points.len(), 3);
+        assert!(pc.points[1][0].is_nan() && pc.points[2][1].is_infinite() && pc.points[2][2] < 0.0);
+        let limits = ReadLimits {
+            max_points: 2,
+            max_bytes: 1 << 20,
+        };
+        let e = parse_point_cloud(b"1000000000\n1 2 3\n", PointFormat::Pts, &limits).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                IoError::TooManyPoints {
+                    declared: 1_000_000_000,
+                    limit: 2,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let e = parse_point_cloud(b"1 2 3\n1 2 3\n1 2 3\n", PointFormat::Xyz, &limits).unwrap_err();
+        assert!(
+            matches!(e, IoError::TooManyPoints { declared: 3, .. }),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn bad_rows_report_their_line() {
+        let e = read("1 2 3\n# c\n4 x 6\n", PointFormat::Xyz).unwrap_err();
+        assert!(
+            matches!(&e, IoError::Parse { line: 3, message, .. } if message.contains("`x`")),
+            "{e}"
+        );
+        let e = read("1 2 3 0 0 1\n1 2 3\n", PointFormat::Xyz).unwrap_err();
+        assert!(matches!(e, IoError::Parse { line: 2, .. }), "{e}");
+        let e = read("1 2\n", PointFormat::Xyz).unwrap_err();
+        assert!(matches!(e, IoError::Parse { line: 1, .. }), "{e}");
+        let e = read("a,y,z\n1,2,3\n", PointFormat::Csv).unwrap_err();
+        assert!(
+            matches!(&e, IoError::MissingField { field, .. } if field == "x"),
+            "{e}"
+        );
+        let e = read("# only comments\n\n", PointFormat::Xyz).unwrap_err();
+        assert!(matches!(e, IoError::Empty { .. }), "{e}");
+    }
 }

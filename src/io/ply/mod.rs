@@ -11,247 +11,12 @@
 
 use std::path::Path;
 
-use super::IoError;
-use super::ReadLimits;
-use crate::geometry::{PointCloud, Point3, TriMesh};
+mod header;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Encoding {
-    Ascii,
-    BinaryLe,
-    BinaryBe,
-}
+use header::{Element, Encoding, Header, PropKind, Scalar, parse_err, parse_header};
 
-impl Encoding {
-    fn label(self) -> &'static str {
-        match self {
-            Encoding::Ascii => "ASCII PLY",
-            Encoding::BinaryLe | Encoding::BinaryBe => "binary PLY",
-        }
-    }
-}
-
-/// A PLY scalar type.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(name: &str) -> Option<Scalar> {
-        Some(match name {
-            "char" | "int8" => Scalar::I8,
-            "uchar" | "uint8" => Scalar::U8,
-            "short" | "int16" => Scalar::I16,
-            "ushort" | "uint16" => Scalar::U16,
-            "int" | "int32" => Scalar::I32,
-            "uint" | "uint32" => Scalar::U32,
-            "float" | "float32" => Scalar::F32,
-            "double" | "float64" => Scalar::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Scalar::I8 | Scalar::U8 => 1,
-            Scalar::I16 | Scalar::U16 => 2,
-            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
-            Scalar::F64 => 8,
-        }
-    }
-
-    /// Decodes `b` (exactly `self.size()` bytes).
-    fn decode(self, b: &[u8], big: bool) -> f64 {
-        fn arr<const N: usize>(b: &[u8], big: bool) -> [u8; N] {
-            let mut a = [0u8; N];
-            a.copy_from_slice(&b[..N]);
-            if big {
-                a.reverse();
-            }
-            a
-        }
-        match self {
-            Scalar::I8 => f64::from(b[0] as i8),
-            Scalar::U8 => f64::from(b[0]),
-            Scalar::I16 => f64::from(i16::from_le_bytes(arr(b, big))),
-            Scalar::U16 => f64::from(u16::from_le_bytes(arr(b, big))),
-            Scalar::I32 => f64::from(i32::from_le_bytes(arr(b, big))),
-            Scalar::U32 => f64::from(u32::from_le_bytes(arr(b, big))),
-            Scalar::F32 => f64::from(f32::from_le_bytes(arr(b, big))),
-            Scalar::F64 => f64::from_le_bytes(arr(b, big)),
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy)]
-enum PropKind {
-    Scalar(Scalar),
-    List { count: Scalar, item: Scalar },
-}
-
-#[derive(Debug)]
-struct Property {
-    name: String,
-    kind: PropKind,
-}
-
-#[derive(Debug)]
-struct Element {
-    name: String,
-    count: u64,
-    props: Vec<Property>,
-}
-
-impl Element {
-    /// Minimum bytes one record occupies in `enc` (exact for binary elements without lists).
-    fn min_record_bytes(&self, enc: Encoding) -> u64 {
-        self.props
-            .iter()
-            .map(|p| match (enc, p.kind) {
-                (Encoding::Ascii, _) => 2,
-                (_, PropKind::Scalar(s)) => s.size() as u64,
-                (_, PropKind::List { count, .. }) => count.size() as u64,
-            })
-            .sum()
-    }
-}
-
-#[derive(Debug)]
-struct Header {
-    encoding: Encoding,
-    elements: Vec<Element>,
-    body_start: usize,
-    /// 1-based line number of the first body line (for ASCII error messages).
-    body_line: usize,
-}
-
-fn parse_err(src: &Path, line: usize, message: String) -> IoError {
-    IoError::Parse {
-        path: src.to_path_buf(),
-        format: "PLY",
-        line,
-        message,
-    }
-}
-
-/// Parses the header up to and including `end_header`.
-fn parse_header(bytes: &[u8], src: &Path) -> Result<Header, IoError> {
-    let mut pos = 0usize;
-    let mut line_no = 0usize;
-    let mut encoding = None;
-    let mut elements: Vec<Element> = Vec::new();
-    while pos < bytes.len() {
-        let end = bytes[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |i| pos + i);
-        let raw = &bytes[pos..end];
-        pos = (end + 1).min(bytes.len());
-        line_no += 1;
-        let line = std::str::from_utf8(raw)
-            .map_err(|_| parse_err(src, line_no, "header line is not text".into()))?
-            .trim();
-        let mut tok = line.split_ascii_whitespace();
-        let Some(key) = tok.next() else { continue };
-        let rest: Vec<&str> = tok.collect();
-        match key {
-            "ply" if line_no == 1 => {}
-            _ if line_no == 1 => {
-                return Err(parse_err(src, 1, "file does not start with `ply`".into()));
-            }
-            "comment" | "obj_info" => {}
-            "format" => encoding = Some(parse_format(&rest, src, line_no)?),
-            "element" => elements.push(parse_element(&rest, src, line_no)?),
-            "property" => {
-                let el = elements.last_mut().ok_or_else(|| {
-                    parse_err(src, line_no, "`property` before any `element`".into())
-                })?;
-                el.props.push(parse_property(&rest, src, line_no)?);
-            }
-            "end_header" => {
-                let encoding = encoding
-                    .ok_or_else(|| parse_err(src, line_no, "no `format` line in header".into()))?;
-                return Ok(Header {
-                    encoding,
-                    elements,
-                    body_start: end.saturating_add(1).min(bytes.len()),
-                    body_line: line_no + 1,
-                });
-            }
-            other => {
-                return Err(parse_err(
-                    src,
-                    line_no,
-                    format!("unknown header keyword `{other}`"),
-                ));
-            }
-        }
-    }
-    Err(parse_err(src, line_no.max(1), "header has no `end_header` line".into()))
-}
-
-fn parse_format(rest: &[&str], src: &Path, line: usize) -> Result<Encoding, IoError> {
-    match rest.first().copied() {
-        Some("ascii") => Ok(Encoding::Ascii),
-        Some("binary_little_endian") => Ok(Encoding::BinaryLe),
-        Some("binary_big_endian") => Ok(Encoding::BinaryBe),
-        other => Err(parse_err(
-            src,
-            line,
-            format!(
-                "unknown format `{}` (expected ascii, binary_little_endian or binary_big_endian)",
-                other.unwrap_or("")
-            ),
-        )),
-    }
-}
-
-fn parse_element(rest: &[&str], src: &Path, line: usize) -> Result<Element, IoError> {
-    let (Some(name), Some(count)) = (rest.first(), rest.get(1)) else {
-        return Err(parse_err(src, line, "expected `element <name> <count>`".into()));
-    };
-    let count = count
-        .parse::<u64>()
-        .map_err(|_| parse_err(src, line, format!("element count `{count}` is not a count")))?;
-    Ok(Element {
-        name: (*name).to_string(),
-        count,
-        props: Vec::new(),
-    })
-}
-
-fn parse_property(rest: &[&str], src: &Path, line: usize) -> Result<Property, IoError> {
-    let scalar = |t: &str| {
-        Scalar::parse(t).ok_or_else(|| parse_err(src, line, format!("unknown property type `{t}`")))
-    };
-    match rest {
-        ["list", ct, it, name] => Ok(Property {
-            name: (*name).to_string(),
-            kind: PropKind::List {
-                count: scalar(ct)?,
-                item: scalar(it)?,
-            },
-        }),
-        [ty, name] if *ty != "list" => Ok(Property {
-            name: (*name).to_string(),
-            kind: PropKind::Scalar(scalar(ty)?),
-        }),
-        _ => Err(parse_err(
-            src,
-            line,
-            "expected `property <type> <name>` or `property list <count type> <item type> <name>`"
-                .into(),
-        )),
-    }
-}
+use super::{IoError, ReadLimits};
+use crate::geometry::{Point3, PointCloud, TriMesh};
 
 /// Source of property values: the ASCII token stream or the binary byte stream.
 trait Body {
@@ -324,7 +89,11 @@ impl<'a> AsciiBody<'a> {
             self.pos += 1;
         }
         let start = self.pos;
-        while self.data.get(self.pos).is_some_and(|b| !b.is_ascii_whitespace()) {
+        while self
+            .data
+            .get(self.pos)
+            .is_some_and(|b| !b.is_ascii_whitespace())
+        {
             self.pos += 1;
         }
         if start == self.pos {
@@ -441,11 +210,12 @@ fn vertex_slots(el: &Element, src: &Path) -> Result<(Vec<Option<usize>>, bool), 
         if !matches!(p.kind, PropKind::Scalar(_)) {
             continue;
         }
-        if let Some(s) = names.iter().position(|alts| alts.contains(&p.name.as_str())) {
-            if !found[s] {
-                found[s] = true;
-                slots[i] = Some(s);
-            }
+        let slot = names
+            .iter()
+            .position(|alts| alts.contains(&p.name.as_str()));
+        if let Some(s) = slot.filter(|&s| !found[s]) {
+            found[s] = true;
+            slots[i] = Some(s);
         }
     }
     if let Some(miss) = (0..3).find(|&s| !found[s]) {
@@ -457,7 +227,10 @@ fn vertex_slots(el: &Element, src: &Path) -> Result<(Vec<Option<usize>>, bool), 
     }
     let normals = found[3..].iter().all(|&f| f);
     if !normals {
-        slots.iter_mut().filter(|s| s.is_some_and(|k| k >= 3)).for_each(|s| *s = None);
+        slots
+            .iter_mut()
+            .filter(|s| s.is_some_and(|k| k >= 3))
+            .for_each(|s| *s = None);
     }
     Ok((slots, normals))
 }
@@ -489,7 +262,12 @@ fn check_body_size(h: &Header, body_len: usize, src: &Path) -> Result<(), IoErro
     Ok(())
 }
 
-fn read_ply(bytes: &[u8], limits: &ReadLimits, src: &Path, want: Want) -> Result<PlyContent, IoError> {
+fn read_ply(
+    bytes: &[u8],
+    limits: &ReadLimits,
+    src: &Path,
+    want: Want,
+) -> Result<PlyContent, IoError> {
     let h = parse_header(bytes, src)?;
     let vi = h
         .elements
@@ -684,7 +462,10 @@ fn list_len(v: f64, el: &Element, src: &Path) -> Result<u64, IoError> {
         Err(IoError::Invalid {
             path: src.to_path_buf(),
             format: "PLY",
-            message: format!("list length {v} in element `{}` is not a valid count", el.name),
+            message: format!(
+                "list length {v} in element `{}` is not a valid count",
+                el.name
+            ),
         })
     }
 }
@@ -762,16 +543,36 @@ mod tests {
         let mut props: Vec<(&str, &str)> = Vec::new();
         let t = s.ty;
         if s.extras {
-            props.extend([("red", "uchar"), ("z", t), ("nx", t), ("x", t), ("green", "uint8")]);
-            props.extend([("y", t), ("ny", t), ("LIST", "list"), ("nz", t), ("blue", "uchar")]);
+            props.extend([
+                ("red", "uchar"),
+                ("z", t),
+                ("nx", t),
+                ("x", t),
+                ("green", "uint8"),
+            ]);
+            props.extend([
+                ("y", t),
+                ("ny", t),
+                ("LIST", "list"),
+                ("nz", t),
+                ("blue", "uchar"),
+            ]);
         } else {
-            props.extend([("x", t), ("y", t), ("z", t), ("nx", t), ("ny", t), ("nz", t)]);
+            props.extend([
+                ("x", t),
+                ("y", t),
+                ("z", t),
+                ("nx", t),
+                ("ny", t),
+                ("nz", t),
+            ]);
         }
         if !s.normals {
             props.retain(|p| !p.0.starts_with('n'));
         }
         let mut h = format!("ply\nformat {} 1.0\ncomment test\nobj_info x\n", s.enc);
-        let face_head = "element face 2\nproperty list uchar int vertex_indices\nproperty uchar flags\n";
+        let face_head =
+            "element face 2\nproperty list uchar int vertex_indices\nproperty uchar flags\n";
         if s.face_first {
             h.push_str(face_head);
         }
@@ -835,8 +636,12 @@ mod tests {
     #[test]
     fn round_trip_all_encodings_types_and_layouts() {
         let mut st = 42u64;
-        let pts: Vec<Point3> = (0..37).map(|_| [splitmix(&mut st), splitmix(&mut st), splitmix(&mut st)]).collect();
-        let nrm: Vec<Point3> = (0..37).map(|_| [splitmix(&mut st), splitmix(&mut st), splitmix(&mut st)]).collect();
+        let pts: Vec<Point3> = (0..37)
+            .map(|_| [splitmix(&mut st), splitmix(&mut st), splitmix(&mut st)])
+            .collect();
+        let nrm: Vec<Point3> = (0..37)
+            .map(|_| [splitmix(&mut st), splitmix(&mut st), splitmix(&mut st)])
+            .collect();
         for enc in ["ascii", "binary_little_endian", "binary_big_endian"] {
             for ty in ["float", "double", "float32", "float64"] {
                 for mask in 0..8u8 {
@@ -850,10 +655,16 @@ mod tests {
                     let bytes = make_ply(&pts, &nrm, s);
                     let pc = parse_point_cloud(&bytes, PointFormat::Ply, &ReadLimits::default())
                         .unwrap_or_else(|e| panic!("{enc} {ty} {mask}: {e}"));
-                    let tol = if ty.contains("32") || ty == "float" { 1e-5 } else { 1e-12 };
+                    let tol = if ty.contains("32") || ty == "float" {
+                        1e-5
+                    } else {
+                        1e-12
+                    };
                     let close = |a: &[Point3], b: &[Point3]| {
                         a.len() == b.len()
-                            && a.iter().zip(b).all(|(p, q)| (0..3).all(|k| (p[k] - q[k]).abs() <= tol * q[k].abs().max(1.0)))
+                            && a.iter().zip(b).all(|(p, q)| {
+                                (0..3).all(|k| (p[k] - q[k]).abs() <= tol * q[k].abs().max(1.0))
+                            })
                     };
                     assert!(close(&pc.points, &pts), "{enc} {ty} {mask}");
                     match (s.normals, &pc.normals) {
@@ -861,8 +672,13 @@ mod tests {
                         (false, None) => {}
                         other => panic!("{enc} {ty} {mask}: normals {:?}", other.0),
                     }
-                    let mesh = read_ply_mesh(&bytes, &ReadLimits::default(), Path::new("t.ply")).unwrap();
-                    assert_eq!(mesh.triangles, vec![[0, 1, 2], [2, 1, 0]], "{enc} {ty} {mask}");
+                    let mesh =
+                        read_ply_mesh(&bytes, &ReadLimits::default(), Path::new("t.ply")).unwrap();
+                    assert_eq!(
+                        mesh.triangles,
+                        vec![[0, 1, 2], [2, 1, 0]],
+                        "{enc} {ty} {mask}"
+                    );
                 }
             }
         }
@@ -870,8 +686,19 @@ mod tests {
 
     #[test]
     fn every_scalar_type_both_endiannesses() {
-        let types = ["char", "uchar", "short", "ushort", "int", "uint", "float", "double"];
-        let vals = [-5.0, 250.0, -30000.0, 60000.0, -70000.0, 4_000_000_000.0, 1.5, -2.25];
+        let types = [
+            "char", "uchar", "short", "ushort", "int", "uint", "float", "double",
+        ];
+        let vals = [
+            -5.0,
+            250.0,
+            -30000.0,
+            60000.0,
+            -70000.0,
+            4_000_000_000.0,
+            1.5,
+            -2.25,
+        ];
         for enc in ["ascii", "binary_little_endian", "binary_big_endian"] {
             for (k, (ty, v)) in types.iter().zip(vals).enumerate() {
                 let others = ["x", "y", "z"].iter().filter(|&&n| n != "x");
@@ -894,7 +721,10 @@ mod tests {
         let pc = parse_point_cloud(b, PointFormat::Ply, &ReadLimits::default()).unwrap();
         assert!(pc.points[0][0].is_nan() && pc.points[1][1] == f64::INFINITY);
         assert_eq!(pc.points[1][2], -6.0);
-        assert!(pc.normals.is_none(), "two of three normal components must not give normals");
+        assert!(
+            pc.normals.is_none(),
+            "two of three normal components must not give normals"
+        );
     }
 
     #[test]
@@ -906,7 +736,17 @@ mod tests {
         b.extend(b"end_header\n");
         b.extend(vec![0u8; 4096]);
         let e = read_ply_points(&b, &ReadLimits::default(), Path::new("kitten.ply")).unwrap_err();
-        assert!(matches!(e, IoError::Truncated { expected: 125_040, found: 4096, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                IoError::Truncated {
+                    expected: 125_040,
+                    found: 4096,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         let msg = e.to_string();
         assert!(msg.starts_with("kitten.ply: truncated binary PLY: header declares 5210 `vertex` records (125040 bytes)"), "{msg}");
     }
@@ -916,11 +756,34 @@ mod tests {
         let b = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0";
         let start = std::time::Instant::now();
         let e = parse_point_cloud(b, PointFormat::Ply, &ReadLimits::default()).unwrap_err();
-        assert!(matches!(e, IoError::TooManyPoints { declared: 1_000_000_000, limit: 50_000_000, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                IoError::TooManyPoints {
+                    declared: 1_000_000_000,
+                    limit: 50_000_000,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         // With the point limit lifted, the size check must still stop it before allocating.
-        let open = ReadLimits { max_points: usize::MAX, max_bytes: u64::MAX };
+        let open = ReadLimits {
+            max_points: usize::MAX,
+            max_bytes: u64::MAX,
+        };
         let e = parse_point_cloud(b, PointFormat::Ply, &open).unwrap_err();
-        assert!(matches!(e, IoError::Truncated { expected: 12_000_000_000, found: 4, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                IoError::Truncated {
+                    expected: 12_000_000_000,
+                    found: 4,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         let a = b"ply\nformat ascii 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n";
         let e = parse_point_cloud(a, PointFormat::Ply, &open).unwrap_err();
         assert!(matches!(e, IoError::Truncated { .. }), "{e}");
@@ -928,7 +791,11 @@ mod tests {
         let l = b"ply\nformat binary_little_endian 1.0\nelement junk 18000000000000000000\nproperty list uchar int v\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0";
         let e = parse_point_cloud(l, PointFormat::Ply, &open).unwrap_err();
         assert!(matches!(e, IoError::Truncated { .. }), "{e}");
-        assert!(start.elapsed().as_millis() < 200, "took {:?}", start.elapsed());
+        assert!(
+            start.elapsed().as_millis() < 200,
+            "took {:?}",
+            start.elapsed()
+        );
     }
 
     #[test]
@@ -936,7 +803,10 @@ mod tests {
         let lim = ReadLimits::default();
         let parse = |b: &[u8]| parse_point_cloud(b, PointFormat::Ply, &lim).unwrap_err();
         let e = parse(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nproperty float z\nend_header\n1 2\n");
-        assert!(matches!(&e, IoError::MissingField { field, .. } if field == "x"), "{e}");
+        assert!(
+            matches!(&e, IoError::MissingField { field, .. } if field == "x"),
+            "{e}"
+        );
         let e = parse(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 five 6\n");
         assert!(matches!(e, IoError::Parse { line: 9, .. }), "{e}");
         let e = parse(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n");
@@ -948,7 +818,10 @@ mod tests {
         let e = parse(b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty list int float x\nproperty float y\nproperty float z\nend_header\n\xff\xff\xff\xff\0\0\0\0\0\0\0\0");
         assert!(matches!(e, IoError::MissingField { .. }), "{e}");
         let e = parse(b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty list int float q\nproperty float x\nproperty float y\nproperty float z\nend_header\n\xff\xff\xff\xff\0\0\0\0\0\0\0\0\0\0\0\0");
-        assert!(matches!(e, IoError::Invalid { .. }), "negative list length: {e}");
+        assert!(
+            matches!(e, IoError::Invalid { .. }),
+            "negative list length: {e}"
+        );
     }
 
     #[test]
