@@ -11,6 +11,7 @@
 
 pub mod error;
 pub mod geometry;
+pub mod io;
 pub mod linalg;
 pub mod params;
 pub mod pipeline;
