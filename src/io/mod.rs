@@ -25,7 +25,7 @@ use std::path::Path;
 
 pub use error::IoError;
 pub use glb::{decode_glb, encode_glb};
-pub use write::{write_atomic, write_mesh};
+pub use write::{write_atomic, write_mesh, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};
 
