@@ -6,5 +6,6 @@
 
 pub mod geometry;
 pub mod linalg;
+pub mod mesh;
 pub mod polygonize;
 pub mod progress;
