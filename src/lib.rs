@@ -9,16 +9,20 @@
 //! carriers, assembly, field), [`ordering`], [`linalg`], [`polygonize`], [`mesh`], [`io`].
 #![warn(missing_docs)]
 
+pub mod cli;
 pub mod error;
 pub mod geometry;
 pub mod io;
 pub mod linalg;
+pub mod mesh;
+pub mod ordering;
 pub mod params;
 pub mod pipeline;
 pub mod polygonize;
 pub mod progress;
 pub mod rbf;
 pub mod report;
+pub mod spatial;
 
 pub use error::ReconError;
 pub use params::ReconParams;

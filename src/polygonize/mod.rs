@@ -16,3 +16,12 @@ pub trait ScalarField: Sync {
     /// (so the polygonizer may skip it). Returning `true` always is correct but slow.
     fn may_contain_zero(&self, cell: &Aabb) -> bool;
 }
+
+mod block;
+mod extract;
+mod grid;
+mod kuhn;
+mod params;
+
+pub use extract::polygonize;
+pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats};

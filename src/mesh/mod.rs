@@ -1,0 +1,17 @@
+//! Mesh post-processing: topology checks, GPU-friendly reordering and accuracy comparison.
+//!
+//! Everything here works on a plain [`crate::geometry::TriMesh`] and knows nothing of how it was made.
+//! - [`topology`]: components, watertightness, manifoldness, orientation, Euler characteristic and genus.
+//! - [`optimize`]: vertex-cache and vertex-fetch reordering with meshoptimizer.
+//! - [`compare`]: Chamfer / Hausdorff distances to a reference mesh or point set.
+
+pub mod compare;
+mod distance;
+pub mod optimize;
+#[cfg(test)]
+pub(crate) mod test_meshes;
+pub mod topology;
+
+pub use compare::{CompareError, CompareParams, CompareReport, Reference, compare};
+pub use optimize::{OptimizeError, OptimizeStats, optimize_for_gpu};
+pub use topology::{MeshTopology, analyze, area, signed_volume};
