@@ -22,6 +22,9 @@ pub enum ReconError {
     /// Mesh extraction failed.
     #[error(transparent)]
     Polygonize(#[from] crate::polygonize::PolygonizeError),
+    /// Mesh post-processing failed.
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::optimize::OptimizeError),
     /// The caller cancelled.
     #[error("cancelled")]
     Cancelled,

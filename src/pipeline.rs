@@ -61,7 +61,7 @@ pub fn reconstruct(cloud: &PointCloud, params: &ReconParams, progress: &dyn Prog
     for v in &mut mesh.vertices {
         *v = fit.normalization.inverse(v);
     }
-    crate::mesh::optimize::optimize_for_gpu(&mut mesh);
+    crate::mesh::optimize::optimize_for_gpu(&mut mesh)?;
     let topology = crate::mesh::topology::analyze(&mesh);
     timings.post = t.elapsed().as_secs_f64();
     timings.total = start.elapsed().as_secs_f64();

@@ -31,9 +31,9 @@ impl Aabb {
 
     /// Extend the box to contain `p`.
     pub fn grow(&mut self, p: &Point3) {
-        for k in 0..3 {
-            self.min[k] = self.min[k].min(p[k]);
-            self.max[k] = self.max[k].max(p[k]);
+        for ((lo, hi), v) in self.min.iter_mut().zip(self.max.iter_mut()).zip(p) {
+            *lo = lo.min(*v);
+            *hi = hi.max(*v);
         }
     }
 
@@ -83,21 +83,21 @@ impl Aabb {
 
     /// Squared distance from `p` to the box (0 inside).
     pub fn dist2_to(&self, p: &Point3) -> f64 {
-        let mut d2 = 0.0;
-        for k in 0..3 {
-            let d = (self.min[k] - p[k]).max(0.0).max(p[k] - self.max[k]);
-            d2 += d * d;
-        }
-        d2
+        (0..3)
+            .map(|k| {
+                let d = (self.min[k] - p[k]).max(0.0).max(p[k] - self.max[k]);
+                d * d
+            })
+            .sum()
     }
 
     /// Squared distance from `p` to the farthest corner of the box.
     pub fn max_dist2_to(&self, p: &Point3) -> f64 {
-        let mut d2 = 0.0;
-        for k in 0..3 {
-            let d = (p[k] - self.min[k]).abs().max((self.max[k] - p[k]).abs());
-            d2 += d * d;
-        }
-        d2
+        (0..3)
+            .map(|k| {
+                let d = (p[k] - self.min[k]).abs().max((self.max[k] - p[k]).abs());
+                d * d
+            })
+            .sum()
     }
 }
