@@ -6,5 +6,7 @@
 
 pub mod geometry;
 pub mod linalg;
+pub mod ordering;
 pub mod polygonize;
 pub mod progress;
+pub mod spatial;
