@@ -10,6 +10,9 @@ pub enum ReconError {
     /// The cloud cannot be reconstructed (empty, degenerate, ...).
     #[error(transparent)]
     Input(#[from] crate::geometry::clean::InputError),
+    /// The spatial index could not be built.
+    #[error(transparent)]
+    Spatial(#[from] crate::spatial::SpatialError),
     /// Support choice, assembly or carrier fitting failed.
     #[error(transparent)]
     Rbf(#[from] crate::rbf::RbfError),

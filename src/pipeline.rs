@@ -138,7 +138,7 @@ pub fn fit_field(
 
     progress.stage("index");
     let t = Instant::now();
-    let index = build_index(&points, params.index, params.leaf_size);
+    let index = build_index(&points, params.index, params.leaf_size)?;
     let support = estimate_support(&points, index.as_ref(), params.support)?;
     check_memory(&support, points.len(), params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
@@ -158,7 +158,7 @@ pub fn fit_field(
     progress.stage("order");
     let t = Instant::now();
     let perm = compute_ordering(params.ordering, &points, support.radius, &a, None)?;
-    let shape = matrix_shape(&a, &perm);
+    let shape = matrix_shape(&a, &perm)?;
     timings.order = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
