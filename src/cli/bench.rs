@@ -15,7 +15,7 @@ use crate::progress::NoProgress;
 use crate::rbf::{CarrierKind, Kernel, Support};
 use crate::report::{Timings, peak_rss_mib};
 use crate::spatial::IndexKind;
-use crate::spatial::octree::{Octree, OctreeParams};
+use crate::spatial::{Octree, OctreeParams};
 use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -79,7 +79,7 @@ fn table1(a: &BenchArgs) -> Result<()> {
         let mut last = None;
         for _ in 0..a.repeat.max(1) {
             let t = Instant::now();
-            let tree = Octree::build(&pts, &OctreeParams { leaf_size: 10 });
+            let tree = Octree::build(&pts, &OctreeParams { leaf_size: 10 })?;
             tree_s = tree_s.min(t.elapsed().as_secs_f64());
             let mut tm = Timings::default();
             let fit = crate::pipeline::fit_field(&sub, &params, &NoProgress, &mut tm)?;

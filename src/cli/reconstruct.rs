@@ -5,6 +5,7 @@ use crate::io::{MeshFormat, ReadLimits, read_point_cloud, write_atomic, write_me
 use crate::linalg::SolverKind;
 use crate::ordering::OrderingKind;
 use crate::params::{Polynomial, ReconParams};
+use crate::progress::Progress;
 use crate::rbf::{CarrierKind, Kernel, Support};
 use crate::spatial::IndexKind;
 use anyhow::{Context, Result, bail};

@@ -6,7 +6,7 @@
 
 use super::pca::pca;
 use super::{Aabb, Point3, PointCloud, normalized};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::{IndexKind, SpatialError, build_index};
 use rayon::prelude::*;
 
 /// Cleaning parameters.
@@ -64,6 +64,9 @@ pub enum InputError {
         /// Point count.
         n: usize,
     },
+    /// The neighbour index could not be built.
+    #[error(transparent)]
+    Index(#[from] SpatialError),
     /// All points in a plane and no normals.
     #[error(
         "all {n} points lie in one plane: without normals the inside and outside are undefined; give points with normals (PLY nx ny nz or 6-column XYZ)"
@@ -88,12 +91,12 @@ pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointClo
     let pts: Vec<Point3> = finite.iter().map(|&i| cloud.points[i]).collect();
     let tol = params.merge_tolerance * Aabb::from_points(&pts).diagonal();
     let keep: Vec<bool> = if tol > 0.0 {
-        let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts);
+        let tree = build_index(&pts, IndexKind::KdTree, 16)?;
         (0..pts.len())
             .into_par_iter()
-            .map(|i| {
-                let hits = tree.query(&pts[i]).within::<SquaredEuclidean<f64>>(tol * tol).unsorted().execute();
-                !hits.iter().any(|h| (h.item as usize) < i)
+            .map_init(Vec::new, |hits, i| {
+                tree.within(&pts[i], tol, hits);
+                !hits.iter().any(|&h| (h as usize) < i)
             })
             .collect()
     } else {

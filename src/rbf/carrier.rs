@@ -77,7 +77,7 @@ pub enum CarrierError {
 }
 
 /// A fitted carrier solid in normalised units.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub enum Carrier {
     /// `g = |x − center| − radius`.
     Sphere {
@@ -277,7 +277,7 @@ pub fn fit_ellipsoid(points: &[Point3]) -> Result<Carrier, CarrierError> {
 /// `g(x) = Σ w_j n_j·(x − p_j) / Σ w_j`, `w_j = ψ(|x − p_j| / h(x))` with ψ the Wendland C² kernel
 /// and `h(x)` the distance to the (k+1)-th nearest point, so a point entering or leaving the
 /// neighbourhood does so with weight 0 and `g` is continuous everywhere.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct LocalCarrier {
     points: Vec<Point3>,
     normals: Vec<Point3>,
@@ -297,7 +297,7 @@ impl LocalCarrier {
         if points.is_empty() {
             return None;
         }
-        let tree = ImmutableKdTree::new_from_slice(&points);
+        let tree = ImmutableKdTree::new_from_slice(&points).ok()?;
         Some(LocalCarrier { k: k.clamp(1, points.len()), points, normals, tree })
     }
 
