@@ -117,9 +117,6 @@ impl ReconParams {
         if !(1..=4096).contains(&self.leaf_size) {
             return err("leaf-size", self.leaf_size.to_string(), "an integer in 1..=4096");
         }
-        if !(1..=200).contains(&self.carrier.local_neighbours) {
-            return err("carrier-neighbours", self.carrier.local_neighbours.to_string(), "an integer in 1..=200");
-        }
         let tol = self.clean.merge_tolerance;
         if !(tol.is_finite() && (0.0..=1e-2).contains(&tol)) {
             return err("merge-tolerance", tol.to_string(), "a fraction of the bbox diagonal in [0, 0.01]");

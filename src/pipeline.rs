@@ -11,7 +11,8 @@ use crate::polygonize::{PolygonizeParams, ScalarField, polygonize};
 use crate::progress::Progress;
 use crate::rbf::{Carrier, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support, fit_carrier};
 use crate::report::{MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib};
-use crate::spatial::build_index;
+use crate::spatial::{SpatialIndex, build_index};
+use std::sync::Arc;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -138,14 +139,14 @@ pub fn fit_field(
 
     progress.stage("index");
     let t = Instant::now();
-    let index = build_index(&points, params.index, params.leaf_size)?;
+    let index: Arc<dyn SpatialIndex + Send> = Arc::from(build_index(&points, params.index, params.leaf_size)?);
     let support = estimate_support(&points, index.as_ref(), params.support)?;
     check_memory(&support, points.len(), params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
 
     progress.stage("carrier");
     let t = Instant::now();
-    let (carrier, normals_flipped) = fit_oriented_carrier(&points, clean.normals.as_deref(), params)?;
+    let (carrier, normals_flipped) = fit_oriented_carrier(&points, clean.normals.as_deref(), params, support.radius, &index)?;
     let rhs: Vec<f64> = points.par_iter().map(|p| -carrier.value(p)).collect();
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
@@ -227,8 +228,10 @@ fn fit_oriented_carrier(
     points: &[Point3],
     normals: Option<&[Point3]>,
     params: &ReconParams,
+    radius: f64,
+    index: &Arc<dyn SpatialIndex + Send>,
 ) -> Result<(Carrier, bool), ReconError> {
-    let mut carrier = fit_carrier(points, normals, &params.carrier)?;
+    let mut carrier = fit_carrier(points, normals, &params.carrier, radius, index)?;
     let mut flipped = false;
     if let Carrier::Local(local) = &mut carrier {
         let outer = Aabb::from_points(points).inflated(0.25);

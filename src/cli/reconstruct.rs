@@ -35,9 +35,6 @@ pub struct ReconstructArgs {
     /// Carrier solid: auto (default), sphere, ellipsoid, local.
     #[arg(long)]
     pub carrier: Option<CarrierKind>,
-    /// Neighbours blended by the local carrier (default 10).
-    #[arg(long)]
-    pub carrier_neighbours: Option<usize>,
     /// Matrix ordering: none, bfs (seed Algorithm III), rcm (default).
     #[arg(long)]
     pub ordering: Option<OrderingKind>,
@@ -85,9 +82,6 @@ impl TryFrom<&ReconstructArgs> for ReconParams {
         }
         if let Some(c) = a.carrier {
             p.carrier.kind = c;
-        }
-        if let Some(k) = a.carrier_neighbours {
-            p.carrier.local_neighbours = k;
         }
         if let Some(o) = a.ordering {
             p.ordering = o;

@@ -46,6 +46,39 @@ struct Block<'a> {
     out: BlockMesh,
 }
 
+/// Corners per axis of the tiles that [`ScalarField::values_in`] evaluates together.
+const TILE: usize = 4;
+
+/// Field values at the `dims` corners starting at grid corner `lo`, x fastest, evaluated in tiles of
+/// `TILE³` corners so an indexed field gathers its candidates once per tile.
+fn sample_corners(field: &dyn ScalarField, grid: &Grid, lo: [usize; 3], dims: [usize; 3]) -> Vec<f64> {
+    let mut values = vec![0.0; dims.iter().product()];
+    let (mut pts, mut out, mut slots) = (Vec::new(), Vec::new(), Vec::new());
+    for tk in (0..dims[2]).step_by(TILE) {
+        for tj in (0..dims[1]).step_by(TILE) {
+            for ti in (0..dims[0]).step_by(TILE) {
+                pts.clear();
+                slots.clear();
+                for k in tk..(tk + TILE).min(dims[2]) {
+                    for j in tj..(tj + TILE).min(dims[1]) {
+                        for i in ti..(ti + TILE).min(dims[0]) {
+                            pts.push(grid.corner([lo[0] + i, lo[1] + j, lo[2] + k]));
+                            slots.push(i + dims[0] * (j + dims[1] * k));
+                        }
+                    }
+                }
+                let region = crate::geometry::Aabb::from_points(&pts);
+                out.resize(pts.len(), 0.0);
+                field.values_in(&region, &pts, &mut out);
+                for (&s, &v) in slots.iter().zip(&out) {
+                    values[s] = v;
+                }
+            }
+        }
+    }
+    values
+}
+
 /// Extracts the zero set inside block `b` of `grid`.
 pub(crate) fn extract_block(
     field: &dyn ScalarField,
@@ -56,14 +89,7 @@ pub(crate) fn extract_block(
 ) -> BlockMesh {
     let (lo, hi) = grid.block_cells(b);
     let dims = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-    let mut values = Vec::with_capacity(dims.iter().product());
-    for k in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                values.push(field.value(&grid.corner([lo[0] + i, lo[1] + j, lo[2] + k])));
-            }
-        }
-    }
+    let values = sample_corners(field, grid, lo, dims);
     let evaluations = values.len() as u64;
     let first = values.first().is_some_and(|&f| inside(f));
     if values.iter().all(|&f| inside(f) == first) {

@@ -12,6 +12,14 @@ pub trait ScalarField: Sync {
     fn value(&self, p: &Point3) -> f64;
     /// `∇f(p)` (points outwards on the surface).
     fn gradient(&self, p: &Point3) -> Point3;
+    /// Values at `points`, all inside `region`: `out[i] = value(points[i])`. Fields backed by a
+    /// spatial index override this to gather their candidates once per region. `out.len() == points.len()`.
+    fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        let _ = region;
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o = self.value(p);
+        }
+    }
     /// Conservative test: returns `false` only when the zero set certainly does not meet `cell`
     /// (so the polygonizer may skip it). Returning `true` always is correct but slow.
     fn may_contain_zero(&self, cell: &Aabb) -> bool;

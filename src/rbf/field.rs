@@ -1,11 +1,14 @@
 //! The fitted implicit field `f(x) = g(x) + Σ λ_i φ(|x − P_i| / R) + p(x)` (normalised units),
 //! evaluated with the spatial index so only the centres within `R` of `x` are visited
-//! (`O(log n + k)` per evaluation). Implements [`ScalarField`] for the polygonizer.
+//! (`O(log n + k)` per evaluation). One neighbour query serves both the spline and a local carrier.
+//! Implements [`ScalarField`], including the batched [`ScalarField::values_in`] that gathers the
+//! candidate centres once per small box of grid corners.
 
 use super::{Carrier, Kernel};
 use crate::geometry::{Aabb, Point3, dist2, sub};
 use crate::polygonize::ScalarField;
 use crate::spatial::SpatialIndex;
+use std::sync::Arc;
 
 /// A solved CSRBF implicit field.
 pub struct RbfField {
@@ -22,21 +25,26 @@ pub struct RbfField {
     /// Carrier solid `g`.
     pub carrier: Carrier,
     /// Index over `centres`.
-    pub index: Box<dyn SpatialIndex + Send>,
+    pub index: Arc<dyn SpatialIndex + Send>,
 }
 
 impl RbfField {
-    /// The spline part `U(x) − p(x) = Σ λ_i φ(|x − P_i| / R)`.
-    pub fn spline(&self, x: &Point3) -> f64 {
-        let mut hits = Vec::with_capacity(64);
-        self.index.within(x, self.support, &mut hits);
+    /// `f(x)` given `candidates`, a superset of the centres within `R` of `x`.
+    fn value_with(&self, x: &Point3, candidates: &[u32]) -> f64 {
+        let r2 = self.support * self.support;
         let inv_r = 1.0 / self.support;
-        hits.iter()
-            .map(|&i| {
-                let d = dist2(*x, self.centres[i as usize]).sqrt() * inv_r;
-                self.weights[i as usize] * self.kernel.value(d)
-            })
-            .sum()
+        let mut spline = 0.0;
+        for &i in candidates {
+            let d2 = dist2(*x, self.centres[i as usize]);
+            if d2 < r2 {
+                spline += self.weights[i as usize] * self.kernel.value(d2.sqrt() * inv_r);
+            }
+        }
+        let g = match &self.carrier {
+            Carrier::Local(l) => l.value_gradient_with(x, candidates).0,
+            c => c.value(x),
+        };
+        g + spline + self.poly_value(x)
     }
 
     fn poly_value(&self, x: &Point3) -> f64 {
@@ -50,18 +58,31 @@ impl RbfField {
 
 impl ScalarField for RbfField {
     fn value(&self, x: &Point3) -> f64 {
-        self.carrier.value(x) + self.spline(x) + self.poly_value(x)
+        let mut hits = Vec::with_capacity(64);
+        self.index.within(x, self.support, &mut hits);
+        self.value_with(x, &hits)
+    }
+
+    fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        let mut hits = Vec::with_capacity(256);
+        self.index.within(&region.center(), 0.5 * region.diagonal() + self.support, &mut hits);
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o = self.value_with(p, &hits);
+        }
     }
 
     fn gradient(&self, x: &Point3) -> Point3 {
-        let mut g = self.carrier.gradient(x);
+        let mut hits = Vec::with_capacity(64);
+        self.index.within(x, self.support, &mut hits);
+        let mut g = match &self.carrier {
+            Carrier::Local(l) => l.value_gradient_with(x, &hits).1,
+            c => c.gradient(x),
+        };
         if let Some(v) = self.polynomial {
             for k in 0..3 {
                 g[k] += v[k + 1];
             }
         }
-        let mut hits = Vec::with_capacity(64);
-        self.index.within(x, self.support, &mut hits);
         let inv_r = 1.0 / self.support;
         for &i in &hits {
             let c = self.centres[i as usize];
