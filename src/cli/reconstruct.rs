@@ -27,7 +27,7 @@ pub struct ReconstructArgs {
     #[arg(long)]
     pub kernel: Option<Kernel>,
     /// Support radius R in normalised units (the longest bbox edge is 1).
-    #[arg(long, conflicts_with = "neighbours")]
+    #[arg(long, conflicts_with = "neighbours", allow_negative_numbers = true)]
     pub support: Option<f64>,
     /// Choose R to give about K neighbours per point (default 30).
     #[arg(long)]

@@ -89,8 +89,9 @@ pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointClo
         return Err(InputError::NoFinitePoints { total });
     }
     let pts: Vec<Point3> = finite.iter().map(|&i| cloud.points[i]).collect();
-    let tol = params.merge_tolerance * Aabb::from_points(&pts).diagonal();
-    let keep: Vec<bool> = if tol > 0.0 {
+    // A zero diagonal (all points equal) still merges exact duplicates.
+    let tol = (params.merge_tolerance * Aabb::from_points(&pts).diagonal()).max(f64::MIN_POSITIVE);
+    let keep: Vec<bool> = if params.merge_tolerance > 0.0 {
         let tree = build_index(&pts, IndexKind::KdTree, 16)?;
         (0..pts.len())
             .into_par_iter()

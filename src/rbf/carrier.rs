@@ -447,6 +447,7 @@ mod tests {
             assert_eq!(g < 0.0, inside, "g({x:?}) = {g}");
         }
         let max_off = p.iter().map(|q| c.value_gradient(q).0.abs()).fold(0.0, f64::max);
-        assert!(max_off < 1e-3, "offsets at the data should be small, got {max_off}");
+        // Planes of a sphere of radius 0.3 blended over R = 0.08 miss the data by ~κR²/10.
+        assert!(max_off < 0.05 * 0.08, "offsets at the data should be small, got {max_off}");
     }
 }
