@@ -42,6 +42,9 @@ impl From<crate::rbf::CarrierError> for ReconError {
 impl ReconError {
     /// True when the input data (not the parameters or the machine) is at fault: the HTTP API answers 422.
     pub fn is_input_problem(&self) -> bool {
-        matches!(self, ReconError::Input(_) | ReconError::Rbf(crate::rbf::RbfError::Carrier(_)))
+        matches!(
+            self,
+            ReconError::Input(_) | ReconError::Rbf(crate::rbf::RbfError::Carrier(_))
+        )
     }
 }

@@ -99,10 +99,20 @@ pub struct ParamError {
 impl ReconParams {
     /// Check ranges; the command line and the HTTP API call this before any work.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let err = |name, value: String, expected| Err(ParamError { name, value, expected });
+        let err = |name, value: String, expected| {
+            Err(ParamError {
+                name,
+                value,
+                expected,
+            })
+        };
         match self.support {
             Support::Radius(r) if !(r.is_finite() && r > 0.0 && r <= 2.0) => {
-                return err("support", r.to_string(), "a radius in (0, 2] normalised units (the longest bbox edge is 1)");
+                return err(
+                    "support",
+                    r.to_string(),
+                    "a radius in (0, 2] normalised units (the longest bbox edge is 1)",
+                );
             }
             Support::Neighbours(k) if !(4..=2000).contains(&k) => {
                 return err("neighbours", k.to_string(), "an integer in 4..=2000");
@@ -115,14 +125,26 @@ impl ReconParams {
             return err("resolution", r.to_string(), "an integer in 8..=4096");
         }
         if !(1..=4096).contains(&self.leaf_size) {
-            return err("leaf-size", self.leaf_size.to_string(), "an integer in 1..=4096");
+            return err(
+                "leaf-size",
+                self.leaf_size.to_string(),
+                "an integer in 1..=4096",
+            );
         }
         let tol = self.clean.merge_tolerance;
         if !(tol.is_finite() && (0.0..=1e-2).contains(&tol)) {
-            return err("merge-tolerance", tol.to_string(), "a fraction of the bbox diagonal in [0, 0.01]");
+            return err(
+                "merge-tolerance",
+                tol.to_string(),
+                "a fraction of the bbox diagonal in [0, 0.01]",
+            );
         }
         if !(16..=1 << 22).contains(&self.max_memory_mib) {
-            return err("max-memory-mib", self.max_memory_mib.to_string(), "MiB in 16..=4194304");
+            return err(
+                "max-memory-mib",
+                self.max_memory_mib.to_string(),
+                "MiB in 16..=4194304",
+            );
         }
         Ok(())
     }

@@ -9,11 +9,15 @@ use crate::ordering::{compute_ordering, matrix_shape};
 use crate::params::{Polynomial, ReconParams};
 use crate::polygonize::{PolygonizeParams, ScalarField, polygonize};
 use crate::progress::Progress;
-use crate::rbf::{Carrier, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support, fit_carrier};
-use crate::report::{MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib};
+use crate::rbf::{
+    Carrier, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support, fit_carrier,
+};
+use crate::report::{
+    MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib,
+};
 use crate::spatial::{SpatialIndex, build_index};
-use std::sync::Arc;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// A reconstructed mesh (input units) with its report.
@@ -45,16 +49,25 @@ pub struct FittedField {
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
-pub fn reconstruct(cloud: &PointCloud, params: &ReconParams, progress: &dyn Progress) -> Result<Reconstruction, ReconError> {
+pub fn reconstruct(
+    cloud: &PointCloud,
+    params: &ReconParams,
+    progress: &dyn Progress,
+) -> Result<Reconstruction, ReconError> {
     let start = Instant::now();
     params.validate()?;
     let mut timings = Timings::default();
     let fit = fit_field(cloud, params, progress, &mut timings)?;
-    let resolution = params.resolution.unwrap_or_else(|| auto_resolution(fit.support.spacing));
+    let resolution = params
+        .resolution
+        .unwrap_or_else(|| auto_resolution(fit.support.spacing));
     let domain = polygonize_domain(&fit, resolution);
     progress.stage("polygonize");
     let t = Instant::now();
-    let pp = PolygonizeParams { resolution, ..Default::default() };
+    let pp = PolygonizeParams {
+        resolution,
+        ..Default::default()
+    };
     let (mut mesh, stats) = polygonize(&fit.field, &domain, &pp, progress)?;
     timings.polygonize = t.elapsed().as_secs_f64();
     progress.stage("post");
@@ -73,7 +86,9 @@ pub fn reconstruct(cloud: &PointCloud, params: &ReconParams, progress: &dyn Prog
         residual: fit.residual,
         mesh: topology,
         timings_s: timings,
-        memory: crate::report::MemoryReport { peak_rss_mib: peak_rss_mib() },
+        memory: crate::report::MemoryReport {
+            peak_rss_mib: peak_rss_mib(),
+        },
         polygonize: PolygonizeReport {
             cells_total: stats.cells_total,
             blocks_total: stats.blocks_total,
@@ -134,26 +149,43 @@ pub fn fit_field(
     let t = Instant::now();
     let (clean, clean_stats) = clean_cloud(cloud, &params.clean)?;
     let normalization = Normalization::from_aabb(&Aabb::from_points(&clean.points));
-    let points: Vec<Point3> = clean.points.iter().map(|p| normalization.forward(p)).collect();
+    let points: Vec<Point3> = clean
+        .points
+        .iter()
+        .map(|p| normalization.forward(p))
+        .collect();
     timings.clean = t.elapsed().as_secs_f64();
 
     progress.stage("index");
     let t = Instant::now();
-    let index: Arc<dyn SpatialIndex + Send> = Arc::from(build_index(&points, params.index, params.leaf_size)?);
+    let index: Arc<dyn SpatialIndex + Send> =
+        Arc::from(build_index(&points, params.index, params.leaf_size)?);
     let support = estimate_support(&points, index.as_ref(), params.support)?;
     check_memory(&support, points.len(), params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
 
     progress.stage("carrier");
     let t = Instant::now();
-    let (carrier, normals_flipped) = fit_oriented_carrier(&points, clean.normals.as_deref(), params, support.radius, &index)?;
+    let (carrier, normals_flipped) = fit_oriented_carrier(
+        &points,
+        clean.normals.as_deref(),
+        params,
+        support.radius,
+        &index,
+    )?;
     let rhs: Vec<f64> = points.par_iter().map(|p| -carrier.value(p)).collect();
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
     progress.stage("assemble");
     let t = Instant::now();
-    let a = assemble_matrix(&points, index.as_ref(), params.kernel, support.radius, progress)?;
+    let a = assemble_matrix(
+        &points,
+        index.as_ref(),
+        params.kernel,
+        support.radius,
+        progress,
+    )?;
     timings.assemble = t.elapsed().as_secs_f64();
 
     progress.stage("order");
@@ -165,8 +197,12 @@ pub fn fit_field(
 
     progress.stage("factor");
     let t = Instant::now();
-    let budget_values = (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
-    let solver = SolverParams { kind: params.solver, max_factor_values: budget_values };
+    let budget_values =
+        (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
+    let solver = SolverParams {
+        kind: params.solver,
+        max_factor_values: budget_values,
+    };
     let (factor, fstats) = factorize(&a, Some(&perm.perm), &solver, progress)?;
     timings.factor = t.elapsed().as_secs_f64();
 
@@ -195,16 +231,36 @@ pub fn fit_field(
     };
     drop(factor);
     drop(a);
-    let field =
-        RbfField { centres: points.clone(), weights, polynomial, kernel: params.kernel, support: support.radius, carrier, index };
+    let field = RbfField {
+        centres: points.clone(),
+        weights,
+        polynomial,
+        kernel: params.kernel,
+        support: support.radius,
+        carrier,
+        index,
+    };
     let t = Instant::now();
     let residual = residual_at(&field, &points);
     timings.residual = t.elapsed().as_secs_f64();
-    Ok(FittedField { field, normalization, points, clean: clean_stats, support, matrix, residual, normals_flipped })
+    Ok(FittedField {
+        field,
+        normalization,
+        points,
+        clean: clean_stats,
+        support,
+        matrix,
+        residual,
+        normals_flipped,
+    })
 }
 
 fn check_cancel(progress: &dyn Progress) -> Result<(), ReconError> {
-    if progress.cancelled() { Err(ReconError::Cancelled) } else { Ok(()) }
+    if progress.cancelled() {
+        Err(ReconError::Cancelled)
+    } else {
+        Ok(())
+    }
 }
 
 /// Refuse before assembly when the matrix alone (values + indices, twice during assembly) would not fit.
@@ -238,9 +294,21 @@ fn fit_oriented_carrier(
         let negatives = (0..8)
             .filter(|c| {
                 let p = [
-                    if c & 1 == 0 { outer.min[0] } else { outer.max[0] },
-                    if c & 2 == 0 { outer.min[1] } else { outer.max[1] },
-                    if c & 4 == 0 { outer.min[2] } else { outer.max[2] },
+                    if c & 1 == 0 {
+                        outer.min[0]
+                    } else {
+                        outer.max[0]
+                    },
+                    if c & 2 == 0 {
+                        outer.min[1]
+                    } else {
+                        outer.max[1]
+                    },
+                    if c & 4 == 0 {
+                        outer.min[2]
+                    } else {
+                        outer.max[2]
+                    },
                 ];
                 local.value_gradient(&p).0 < 0.0
             })
@@ -260,5 +328,8 @@ pub fn residual_at(field: &dyn ScalarField, points: &[Point3]) -> ResidualReport
         .map(|p| field.value(p).abs())
         .fold(|| (0.0f64, 0.0f64), |(s, m), v| (s + v * v, m.max(v)))
         .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)));
-    ResidualReport { rms: (sum2 / points.len().max(1) as f64).sqrt(), max }
+    ResidualReport {
+        rms: (sum2 / points.len().max(1) as f64).sqrt(),
+        max,
+    }
 }

@@ -2,8 +2,8 @@
 
 mod common;
 
-use rbfsurf::geometry::synthetic::Shape;
 use rbfsurf::geometry::PointCloud;
+use rbfsurf::geometry::synthetic::Shape;
 use rbfsurf::linalg::SolverKind;
 use rbfsurf::ordering::OrderingKind;
 use rbfsurf::params::{Polynomial, ReconParams};
@@ -16,7 +16,11 @@ fn check_closed(name: &str, rec: &rbfsurf::Reconstruction, components: usize, ge
     assert!(m.watertight && m.manifold, "{name}: {m:?}");
     assert_eq!(m.components, components, "{name}: {m:?}");
     assert_eq!(m.genus, Some(genus), "{name}: {m:?}");
-    assert!(rec.report.residual.max < 1e-8, "{name}: residual {:?}", rec.report.residual);
+    assert!(
+        rec.report.residual.max < 1e-8,
+        "{name}: residual {:?}",
+        rec.report.residual
+    );
 }
 
 #[test]
@@ -31,8 +35,15 @@ fn synthetic_shapes_give_closed_meshes_of_the_right_topology_near_the_truth() {
         assert!(err < 0.01, "{name}: max vertex error {err}");
         // Outward normals: a step along the normal leaves the solid.
         for (v, nrm) in rec.mesh.vertices.iter().zip(&rec.mesh.normals).step_by(97) {
-            let out = [v[0] + 0.01 * nrm[0], v[1] + 0.01 * nrm[1], v[2] + 0.01 * nrm[2]];
-            assert!(shape.signed_distance(&out) > shape.signed_distance(v), "{name}: inward normal at {v:?}");
+            let out = [
+                v[0] + 0.01 * nrm[0],
+                v[1] + 0.01 * nrm[1],
+                v[2] + 0.01 * nrm[2],
+            ];
+            assert!(
+                shape.signed_distance(&out) > shape.signed_distance(v),
+                "{name}: inward normal at {v:?}"
+            );
         }
     }
 }
@@ -43,7 +54,11 @@ fn points_far_from_the_origin_give_the_same_mesh_shifted() {
     let cloud = shape.sample(4000, 5);
     let shift = 1e6;
     let moved = PointCloud {
-        points: cloud.points.iter().map(|p| [p[0] + shift, p[1] + shift, p[2] + shift]).collect(),
+        points: cloud
+            .points
+            .iter()
+            .map(|p| [p[0] + shift, p[1] + shift, p[2] + shift])
+            .collect(),
         normals: cloud.normals.clone(),
     };
     let a = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
@@ -52,10 +67,19 @@ fn points_far_from_the_origin_give_the_same_mesh_shifted() {
     assert_eq!(a.report.mesh.genus, Some(1));
     assert_eq!(b.report.mesh.genus, Some(1));
     let mut va: Vec<[f64; 3]> = a.mesh.vertices.clone();
-    let mut vb: Vec<[f64; 3]> = b.mesh.vertices.iter().map(|p| [p[0] - shift, p[1] - shift, p[2] - shift]).collect();
+    let mut vb: Vec<[f64; 3]> = b
+        .mesh
+        .vertices
+        .iter()
+        .map(|p| [p[0] - shift, p[1] - shift, p[2] - shift])
+        .collect();
     va.sort_by(|x, y| x.partial_cmp(y).unwrap());
     vb.sort_by(|x, y| x.partial_cmp(y).unwrap());
-    let worst = va.iter().zip(&vb).map(|(x, y)| (0..3).map(|k| (x[k] - y[k]).abs()).fold(0.0, f64::max)).fold(0.0, f64::max);
+    let worst = va
+        .iter()
+        .zip(&vb)
+        .map(|(x, y)| (0..3).map(|k| (x[k] - y[k]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
     assert!(worst < 1e-6, "shifted mesh differs by {worst}");
 }
 
@@ -63,20 +87,39 @@ fn points_far_from_the_origin_give_the_same_mesh_shifted() {
 fn every_solver_ordering_and_polynomial_gives_the_same_surface() {
     let shape = Shape::by_name("sphere").unwrap();
     let cloud = shape.sample(1500, 11);
-    let base = ReconParams { resolution: Some(48), ..Default::default() };
+    let base = ReconParams {
+        resolution: Some(48),
+        ..Default::default()
+    };
     let reference = reconstruct(&cloud, &base, &NoProgress).unwrap();
     for solver in [SolverKind::Envelope, SolverKind::Sparse, SolverKind::Ldl] {
         for ordering in [OrderingKind::None, OrderingKind::Bfs, OrderingKind::Rcm] {
-            let p = ReconParams { solver, ordering, ..base.clone() };
+            let p = ReconParams {
+                solver,
+                ordering,
+                ..base.clone()
+            };
             let rec = reconstruct(&cloud, &p, &NoProgress).unwrap();
-            assert_eq!(rec.mesh.triangles.len(), reference.mesh.triangles.len(), "{solver} {ordering}");
-            assert!(rec.report.residual.max < 1e-9, "{solver} {ordering}: {:?}", rec.report.residual);
+            assert_eq!(
+                rec.mesh.triangles.len(),
+                reference.mesh.triangles.len(),
+                "{solver} {ordering}"
+            );
+            assert!(
+                rec.report.residual.max < 1e-9,
+                "{solver} {ordering}: {:?}",
+                rec.report.residual
+            );
         }
     }
-    for carrier in [CarrierKind::Sphere, CarrierKind::Ellipsoid, CarrierKind::Local] {
+    for carrier in [
+        CarrierKind::Sphere,
+        CarrierKind::Ellipsoid,
+        CarrierKind::Local,
+    ] {
         for kernel in Kernel::ALL {
             let p = ReconParams {
-                carrier: CarrierParams { kind: carrier, ..Default::default() },
+                carrier: CarrierParams { kind: carrier },
                 kernel,
                 polynomial: Polynomial::Linear,
                 ..base.clone()
@@ -89,7 +132,8 @@ fn every_solver_ordering_and_polynomial_gives_the_same_surface() {
 
 #[test]
 fn kitten_is_one_closed_genus_one_surface() {
-    let cloud = rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
+    let cloud =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
     let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
     check_closed("kitten", &rec, 1, 1);
 }
@@ -97,11 +141,21 @@ fn kitten_is_one_closed_genus_one_surface() {
 #[test]
 fn bunny_is_close_to_its_reference_mesh() {
     use rbfsurf::mesh::compare::{CompareParams, Reference, compare};
-    let cloud = rbfsurf::io::read_point_cloud(&common::data("bunny_cgal_10k.ply"), &Default::default()).unwrap();
+    let cloud =
+        rbfsurf::io::read_point_cloud(&common::data("bunny_cgal_10k.ply"), &Default::default())
+            .unwrap();
     let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
     check_closed("bunny 10k", &rec, 1, 0);
     let reference = rbfsurf::io::read_mesh(&common::data("bunny00.off")).unwrap();
-    let c = compare(&rec.mesh, Reference::Mesh(&reference), &CompareParams { samples: 20_000, ..Default::default() }).unwrap();
+    let c = compare(
+        &rec.mesh,
+        Reference::Mesh(&reference),
+        &CompareParams {
+            samples: 20_000,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert!(c.chamfer_rel < 2e-3, "{c:?}");
     assert!(c.hausdorff_rel < 2e-2, "{c:?}");
 }
@@ -109,8 +163,14 @@ fn bunny_is_close_to_its_reference_mesh() {
 #[test]
 fn oversized_support_is_refused_before_allocating() {
     let cloud = Shape::by_name("sphere").unwrap().sample(20_000, 1);
-    let p = ReconParams { support: Support::Radius(1.5), max_memory_mib: 64, ..Default::default() };
-    let err = reconstruct(&cloud, &p, &NoProgress).err().expect("must refuse");
+    let p = ReconParams {
+        support: Support::Radius(1.5),
+        max_memory_mib: 64,
+        ..Default::default()
+    };
+    let err = reconstruct(&cloud, &p, &NoProgress)
+        .err()
+        .expect("must refuse");
     let msg = err.to_string();
     assert!(msg.contains("MiB") && msg.contains("--support"), "{msg}");
 }
@@ -120,7 +180,18 @@ fn cancellation_stops_the_work() {
     let cloud = Shape::by_name("sphere").unwrap().sample(2000, 1);
     let flag = CancelFlag::default();
     flag.cancel();
-    let err = reconstruct(&cloud, &ReconParams::default(), &flag).err().expect("cancelled");
-    assert!(matches!(err, ReconError::Cancelled | ReconError::Rbf(_) | ReconError::Linalg(_) | ReconError::Polygonize(_)), "{err:?}");
+    let err = reconstruct(&cloud, &ReconParams::default(), &flag)
+        .err()
+        .expect("cancelled");
+    assert!(
+        matches!(
+            err,
+            ReconError::Cancelled
+                | ReconError::Rbf(_)
+                | ReconError::Linalg(_)
+                | ReconError::Polygonize(_)
+        ),
+        "{err:?}"
+    );
     assert!(err.to_string().contains("cancel"), "{err}");
 }

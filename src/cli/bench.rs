@@ -29,7 +29,11 @@ pub struct BenchArgs {
     #[arg(long, default_value = "data/bunny_cgal.ply")]
     pub bunny: PathBuf,
     /// Sizes for `scaling` (the bunny's size uses the bunny, others a synthetic torus).
-    #[arg(long, value_delimiter = ',', default_value = "10000,37706,100000,300000")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "10000,37706,100000,300000"
+    )]
     pub sizes: Vec<usize>,
     /// Repetitions per case (the minimum time is reported).
     #[arg(long, default_value_t = 3)]
@@ -51,30 +55,46 @@ fn random_subset(cloud: &PointCloud, n: usize, seed: u64) -> PointCloud {
         idx.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
     }
     idx.truncate(n);
-    PointCloud { points: idx.iter().map(|&i| cloud.points[i]).collect(), normals: None }
+    PointCloud {
+        points: idx.iter().map(|&i| cloud.points[i]).collect(),
+        normals: None,
+    }
 }
 
 fn table1(a: &BenchArgs) -> Result<()> {
-    let bunny = read_point_cloud(&a.bunny, &ReadLimits::default()).with_context(|| a.bunny.display().to_string())?;
+    let bunny = read_point_cloud(&a.bunny, &ReadLimits::default())
+        .with_context(|| a.bunny.display().to_string())?;
     let params = ReconParams {
         kernel: Kernel::WendlandC0,
         support: Support::Radius(0.2),
-        carrier: crate::rbf::CarrierParams { kind: CarrierKind::Sphere, ..Default::default() },
+        carrier: crate::rbf::CarrierParams {
+            kind: CarrierKind::Sphere,
+        },
         index: IndexKind::Octree,
         leaf_size: 10,
         ordering: OrderingKind::Bfs,
         solver: SolverKind::Envelope,
         ..Default::default()
     };
-    println!("Seed Table 1 (theirs: AMD Athlon 1 GHz) vs rbfsurf (this machine), min of {} runs\n", a.repeat);
-    println!("| quantity | Head (theirs) | bunny 1,487 (ours) | Seashell (theirs) | bunny 915 (ours) |");
+    println!(
+        "Seed Table 1 (theirs: AMD Athlon 1 GHz) vs rbfsurf (this machine), min of {} runs\n",
+        a.repeat
+    );
+    println!(
+        "| quantity | Head (theirs) | bunny 1,487 (ours) | Seashell (theirs) | bunny 915 (ours) |"
+    );
     println!("|---|---|---|---|---|");
     let mut rows: Vec<[String; 2]> = Vec::new();
     for n in [1487usize, 915] {
         let sub = random_subset(&bunny, n, 2026);
         let norm = Normalization::from_aabb(&Aabb::from_points(&sub.points));
         let pts: Vec<_> = sub.points.iter().map(|p| norm.forward(p)).collect();
-        let mut best = Timings { assemble: f64::MAX, factor: f64::MAX, order: f64::MAX, ..Default::default() };
+        let mut best = Timings {
+            assemble: f64::MAX,
+            factor: f64::MAX,
+            order: f64::MAX,
+            ..Default::default()
+        };
         let mut tree_s = f64::MAX;
         let mut last = None;
         for _ in 0..a.repeat.max(1) {
@@ -91,27 +111,52 @@ fn table1(a: &BenchArgs) -> Result<()> {
         let (stats, fit) = last.expect("at least one run");
         let m = &fit.matrix;
         rows.push([
-            format!("{} nodes, depth {}, {:.4} s", stats.nodes, stats.depth, tree_s),
+            format!(
+                "{} nodes, depth {}, {:.4} s",
+                stats.nodes, stats.depth, tree_s
+            ),
             format!("{:.4} s", best.assemble),
         ]);
-        rows.push([format!("{} (dense {})", m.profile_values, m.dense_values), format!("{:.4} s", best.factor)]);
+        rows.push([
+            format!("{} (dense {})", m.profile_values, m.dense_values),
+            format!("{:.4} s", best.factor),
+        ]);
         rows.push([
             format!("RMS {:.2e} MAX {:.2e}", fit.residual.rms, fit.residual.max),
-            format!("bandwidth {}, nnz {}, BFS {:.4} s", m.bandwidth, m.nnz, best.order),
+            format!(
+                "bandwidth {}, nnz {}, BFS {:.4} s",
+                m.bandwidth, m.nnz, best.order
+            ),
         ]);
     }
     let theirs = [
-        ["467 nodes at 6 levels, 0.05 s", "291 nodes at 8 levels, 0.05 s"],
+        [
+            "467 nodes at 6 levels, 0.05 s",
+            "291 nodes at 8 levels, 0.05 s",
+        ],
         ["0.17 s", "0.1 s"],
         ["426,811 (dense 2,211,169)", "189,310 (dense 837,225)"],
         ["1.98 s", "0.61 s"],
         ["RMS 1.37e-8 MAX 4.49e-6", "RMS 5.81e-8 MAX 3.08e-5"],
         ["-", "-"],
     ];
-    let names = ["tree (K = 10)", "matrix (r = 0.2)", "envelope values", "Cholesky + solve", "residual at data", "band / nnz / ordering"];
+    let names = [
+        "tree (K = 10)",
+        "matrix (r = 0.2)",
+        "envelope values",
+        "Cholesky + solve",
+        "residual at data",
+        "band / nnz / ordering",
+    ];
     let ours = |case: usize, row: usize| -> String { rows[case * 3 + row / 2][row % 2].clone() };
     for (row, name) in names.iter().enumerate() {
-        println!("| {name} | {} | {} | {} | {} |", theirs[row][0], ours(0, row), theirs[row][1], ours(1, row));
+        println!(
+            "| {name} | {} | {} | {} | {} |",
+            theirs[row][0],
+            ours(0, row),
+            theirs[row][1],
+            ours(1, row)
+        );
     }
     Ok(())
 }
@@ -121,15 +166,26 @@ fn reset_peak_rss() {
 }
 
 fn scaling(a: &BenchArgs) -> Result<()> {
-    println!("Scaling with default parameters (min of {} runs for times; peak RSS of the last run)\n", a.repeat);
-    println!("| N | input | clean | index | carrier | assemble | order | factor | solve | polygonize | post | write GLB | total | peak RSS MiB | nnz(A) | triangles | genus |");
+    println!(
+        "Scaling with default parameters (min of {} runs for times; peak RSS of the last run)\n",
+        a.repeat
+    );
+    println!(
+        "| N | input | clean | index | carrier | assemble | order | factor | solve | polygonize | post | write GLB | total | peak RSS MiB | nnz(A) | triangles | genus |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut solver_rows = Vec::new();
     for &n in &a.sizes {
         let (cloud, label) = if n == 37_706 && a.bunny.exists() {
-            (read_point_cloud(&a.bunny, &ReadLimits::default())?, "bunny".to_string())
+            (
+                read_point_cloud(&a.bunny, &ReadLimits::default())?,
+                "bunny".to_string(),
+            )
         } else {
-            (Shape::by_name("torus").expect("torus").sample(n, 7), "torus".to_string())
+            (
+                Shape::by_name("torus").expect("torus").sample(n, 7),
+                "torus".to_string(),
+            )
         };
         let params = ReconParams::default();
         let mut best: Option<crate::report::Report> = None;
@@ -138,13 +194,17 @@ fn scaling(a: &BenchArgs) -> Result<()> {
             let t = Instant::now();
             let mut rec = crate::reconstruct(&cloud, &params, &NoProgress)?;
             let tw = Instant::now();
-            let out = std::env::temp_dir().join(format!("rbfsurf-bench-{}.glb", std::process::id()));
+            let out =
+                std::env::temp_dir().join(format!("rbfsurf-bench-{}.glb", std::process::id()));
             write_mesh(&out, &rec.mesh, MeshFormat::Glb)?;
             let _ = std::fs::remove_file(&out);
             rec.report.timings_s.write = tw.elapsed().as_secs_f64();
             rec.report.timings_s.total = t.elapsed().as_secs_f64();
             rec.report.memory.peak_rss_mib = peak_rss_mib();
-            if best.as_ref().is_none_or(|b| rec.report.timings_s.total < b.timings_s.total) {
+            if best
+                .as_ref()
+                .is_none_or(|b| rec.report.timings_s.total < b.timings_s.total)
+            {
                 best = Some(rec.report);
             }
         }
@@ -152,13 +212,30 @@ fn scaling(a: &BenchArgs) -> Result<()> {
         let t = &r.timings_s;
         println!(
             "| {n} | {label} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | **{:.2}** | {:.0} | {} | {} | {} |",
-            t.clean, t.index, t.carrier, t.assemble, t.order, t.factor, t.solve, t.polygonize, t.post, t.write, t.total,
-            r.memory.peak_rss_mib, r.matrix.nnz, r.mesh.triangles, r.mesh.genus.map_or("-".into(), |g| g.to_string())
+            t.clean,
+            t.index,
+            t.carrier,
+            t.assemble,
+            t.order,
+            t.factor,
+            t.solve,
+            t.polygonize,
+            t.post,
+            t.write,
+            t.total,
+            r.memory.peak_rss_mib,
+            r.matrix.nnz,
+            r.mesh.triangles,
+            r.mesh.genus.map_or("-".into(), |g| g.to_string())
         );
         solver_rows.push(solver_comparison(&cloud, n, &r)?);
     }
-    println!("\nEnvelope (own Jennings profile Cholesky, RCM) vs sparse (faer supernodal, AMD), same matrix\n");
-    println!("| N | envelope values | sparse factor values | ratio | envelope factor+solve s | sparse factor+solve s | ratio |");
+    println!(
+        "\nEnvelope (own Jennings profile Cholesky, RCM) vs sparse (faer supernodal, AMD), same matrix\n"
+    );
+    println!(
+        "| N | envelope values | sparse factor values | ratio | envelope factor+solve s | sparse factor+solve s | ratio |"
+    );
     println!("|---|---|---|---|---|---|---|");
     for row in solver_rows {
         println!("{row}");
@@ -166,17 +243,31 @@ fn scaling(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn solver_comparison(cloud: &PointCloud, n: usize, sparse: &crate::report::Report) -> Result<String> {
-    let params = ReconParams { solver: SolverKind::Envelope, max_memory_mib: 12 * 1024, ..Default::default() };
+fn solver_comparison(
+    cloud: &PointCloud,
+    n: usize,
+    sparse: &crate::report::Report,
+) -> Result<String> {
+    let params = ReconParams {
+        solver: SolverKind::Envelope,
+        max_memory_mib: 12 * 1024,
+        ..Default::default()
+    };
     let mut tm = Timings::default();
     let sparse_s = sparse.timings_s.factor + sparse.timings_s.solve;
     let sf = sparse.matrix.factor_values;
-    Ok(match crate::pipeline::fit_field(cloud, &params, &NoProgress, &mut tm) {
-        Ok(fit) => {
-            let ev = fit.matrix.factor_values;
-            let es = tm.factor + tm.solve;
-            format!("| {n} | {ev} | {sf} | {:.2} | {es:.3} | {sparse_s:.3} | {:.1}× |", ev as f64 / sf as f64, es / sparse_s)
-        }
-        Err(e) => format!("| {n} | refused: {e} | {sf} | - | - | {sparse_s:.3} | - |"),
-    })
+    Ok(
+        match crate::pipeline::fit_field(cloud, &params, &NoProgress, &mut tm) {
+            Ok(fit) => {
+                let ev = fit.matrix.factor_values;
+                let es = tm.factor + tm.solve;
+                format!(
+                    "| {n} | {ev} | {sf} | {:.2} | {es:.3} | {sparse_s:.3} | {:.1}× |",
+                    ev as f64 / sf as f64,
+                    es / sparse_s
+                )
+            }
+            Err(e) => format!("| {n} | refused: {e} | {sf} | - | - | {sparse_s:.3} | - |"),
+        },
+    )
 }

@@ -23,7 +23,9 @@ pub struct CompareArgs {
 
 pub fn run(a: &CompareArgs) -> Result<()> {
     let mesh = read_mesh(&a.mesh).with_context(|| format!("reading {}", a.mesh.display()))?;
-    let ref_mesh = read_mesh(&a.reference).ok().filter(|m| !m.triangles.is_empty());
+    let ref_mesh = read_mesh(&a.reference)
+        .ok()
+        .filter(|m| !m.triangles.is_empty());
     let ref_points;
     let reference = match &ref_mesh {
         Some(m) => Reference::Mesh(m),
@@ -34,7 +36,10 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             Reference::Points(&ref_points)
         }
     };
-    let params = CompareParams { samples: a.samples, ..Default::default() };
+    let params = CompareParams {
+        samples: a.samples,
+        ..Default::default()
+    };
     let r = compare(&mesh, reference, &params)?;
     let mesh_topo = analyze(&mesh);
     let ref_topo = ref_mesh.as_ref().map(analyze);
@@ -46,12 +51,19 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        println!("chamfer_rel   {:.3e}  (mean of {:.3e} mesh→ref and {:.3e} ref→mesh)", r.chamfer_rel, r.mesh_to_ref_mean_rel, r.ref_to_mesh_mean_rel);
+        println!(
+            "chamfer_rel   {:.3e}  (mean of {:.3e} mesh→ref and {:.3e} ref→mesh)",
+            r.chamfer_rel, r.mesh_to_ref_mean_rel, r.ref_to_mesh_mean_rel
+        );
         println!("hausdorff_rel {:.3e}", r.hausdorff_rel);
         println!("samples       {}", r.samples);
         println!(
             "mesh          {} vertices, {} triangles, {} component(s), watertight {}, genus {:?}",
-            mesh_topo.vertices, mesh_topo.triangles, mesh_topo.components, mesh_topo.watertight, mesh_topo.genus
+            mesh_topo.vertices,
+            mesh_topo.triangles,
+            mesh_topo.components,
+            mesh_topo.watertight,
+            mesh_topo.genus
         );
     }
     Ok(())

@@ -25,7 +25,10 @@ pub struct GenerateArgs {
 
 pub fn run(a: &GenerateArgs) -> Result<()> {
     let Some(shape) = Shape::by_name(&a.shape) else {
-        bail!("unknown shape '{}': use sphere, torus or two-spheres", a.shape)
+        bail!(
+            "unknown shape '{}': use sphere, torus or two-spheres",
+            a.shape
+        )
     };
     if a.points == 0 || a.points > 100_000_000 {
         bail!("--points {} is out of range 1..=100000000", a.points);
@@ -36,5 +39,6 @@ pub fn run(a: &GenerateArgs) -> Result<()> {
             *v += a.offset;
         }
     }
-    crate::io::write_points_ply(&a.output, &cloud).with_context(|| format!("writing {}", a.output.display()))
+    crate::io::write_points_ply(&a.output, &cloud)
+        .with_context(|| format!("writing {}", a.output.display()))
 }

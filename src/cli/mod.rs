@@ -46,7 +46,11 @@ where
         Err(e) => {
             // One line: clap's first line, without its usage block.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments").trim_start_matches("error: ");
+            let first = text
+                .lines()
+                .next()
+                .unwrap_or("invalid arguments")
+                .trim_start_matches("error: ");
             eprintln!("rbfsurf: error: {first} (see rbfsurf --help)");
             return 2;
         }

@@ -15,7 +15,9 @@ impl BarProgress {
         if quiet {
             bar.set_draw_target(ProgressDrawTarget::hidden());
         }
-        if let Ok(style) = ProgressStyle::with_template("{elapsed:>4} {msg:<11} [{bar:30}] {percent:>3}%") {
+        if let Ok(style) =
+            ProgressStyle::with_template("{elapsed:>4} {msg:<11} [{bar:30}] {percent:>3}%")
+        {
             bar.set_style(style.progress_chars("=> "));
         }
         BarProgress { bar }
@@ -34,7 +36,8 @@ impl Progress for BarProgress {
     }
 
     fn fraction(&self, done: f64) {
-        self.bar.set_position((done.clamp(0.0, 1.0) * 1000.0) as u64);
+        self.bar
+            .set_position((done.clamp(0.0, 1.0) * 1000.0) as u64);
     }
 
     fn cancelled(&self) -> bool {

@@ -119,7 +119,11 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         if let Some(d) = dir
             && !d.is_dir()
         {
-            bail!("{}: the output directory {} does not exist", out.display(), d.display());
+            bail!(
+                "{}: the output directory {} does not exist",
+                out.display(),
+                d.display()
+            );
         }
     }
     let input = a.input.display().to_string();

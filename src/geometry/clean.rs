@@ -18,7 +18,9 @@ pub struct CleanParams {
 
 impl Default for CleanParams {
     fn default() -> Self {
-        CleanParams { merge_tolerance: 1e-6 }
+        CleanParams {
+            merge_tolerance: 1e-6,
+        }
     }
 }
 
@@ -53,13 +55,17 @@ pub enum InputError {
         total: usize,
     },
     /// Fewer than 4 distinct points.
-    #[error("only {distinct} distinct point(s) after cleaning; a surface needs at least 4 points not in one plane")]
+    #[error(
+        "only {distinct} distinct point(s) after cleaning; a surface needs at least 4 points not in one plane"
+    )]
     TooFewPoints {
         /// Distinct finite points.
         distinct: usize,
     },
     /// All points on a line.
-    #[error("all {n} points lie on a straight line: no surface passes through them; scan more than one line")]
+    #[error(
+        "all {n} points lie on a straight line: no surface passes through them; scan more than one line"
+    )]
     Collinear {
         /// Point count.
         n: usize,
@@ -79,12 +85,17 @@ pub enum InputError {
 
 /// Clean `cloud`: returns the kept points (input units), unit normals (zero vectors where invalid)
 /// and statistics.
-pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointCloud, CleanStats), InputError> {
+pub fn clean_cloud(
+    cloud: &PointCloud,
+    params: &CleanParams,
+) -> Result<(PointCloud, CleanStats), InputError> {
     let total = cloud.points.len();
     if total == 0 {
         return Err(InputError::Empty);
     }
-    let finite: Vec<usize> = (0..total).filter(|&i| cloud.points[i].iter().all(|v| v.is_finite())).collect();
+    let finite: Vec<usize> = (0..total)
+        .filter(|&i| cloud.points[i].iter().all(|v| v.is_finite()))
+        .collect();
     if finite.is_empty() {
         return Err(InputError::NoFinitePoints { total });
     }
@@ -106,16 +117,20 @@ pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointClo
     let kept: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
     let points: Vec<Point3> = kept.iter().map(|&k| pts[k]).collect();
     let mut invalid_normals = 0;
-    let normals = cloud.normals.as_ref().filter(|n| n.len() == total).map(|n| {
-        kept.iter()
-            .map(|&k| {
-                normalized(n[finite[k]]).unwrap_or_else(|| {
-                    invalid_normals += 1;
-                    [0.0; 3]
+    let normals = cloud
+        .normals
+        .as_ref()
+        .filter(|n| n.len() == total)
+        .map(|n| {
+            kept.iter()
+                .map(|&k| {
+                    normalized(n[finite[k]]).unwrap_or_else(|| {
+                        invalid_normals += 1;
+                        [0.0; 3]
+                    })
                 })
-            })
-            .collect::<Vec<_>>()
-    });
+                .collect::<Vec<_>>()
+        });
     let normals = normals.filter(|_| invalid_normals < kept.len());
     let stats = CleanStats {
         points: total,
@@ -123,7 +138,11 @@ pub fn clean_cloud(cloud: &PointCloud, params: &CleanParams) -> Result<(PointClo
         dropped_non_finite: total - finite.len(),
         merged_duplicates: finite.len() - points.len(),
         has_normals: normals.is_some(),
-        invalid_normals: if normals.is_some() { invalid_normals } else { 0 },
+        invalid_normals: if normals.is_some() {
+            invalid_normals
+        } else {
+            0
+        },
     };
     check_degenerate(&points, normals.is_some())?;
     Ok((PointCloud { points, normals }, stats))
@@ -151,12 +170,20 @@ mod tests {
     use super::*;
 
     fn cloud(points: Vec<Point3>) -> PointCloud {
-        PointCloud { points, normals: None }
+        PointCloud {
+            points,
+            normals: None,
+        }
     }
 
     #[test]
     fn non_finite_points_are_dropped_and_duplicates_merged() {
-        let mut p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let mut p = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
         p.push([f64::NAN, 0.0, 0.0]);
         p.push([1.0, 0.0, f64::INFINITY]);
         p.push([1.0, 0.0, 0.0]);
@@ -171,24 +198,61 @@ mod tests {
 
     #[test]
     fn degenerate_clouds_are_refused_with_the_reason() {
-        assert!(matches!(clean_cloud(&cloud(vec![]), &CleanParams::default()), Err(InputError::Empty)));
+        assert!(matches!(
+            clean_cloud(&cloud(vec![]), &CleanParams::default()),
+            Err(InputError::Empty)
+        ));
         let nan = cloud(vec![[f64::NAN; 3]; 3]);
-        assert!(matches!(clean_cloud(&nan, &CleanParams::default()), Err(InputError::NoFinitePoints { total: 3 })));
+        assert!(matches!(
+            clean_cloud(&nan, &CleanParams::default()),
+            Err(InputError::NoFinitePoints { total: 3 })
+        ));
         let dup = cloud(vec![[1.0; 3]; 10]);
-        assert!(matches!(clean_cloud(&dup, &CleanParams::default()), Err(InputError::TooFewPoints { distinct: 1 })));
+        assert!(matches!(
+            clean_cloud(&dup, &CleanParams::default()),
+            Err(InputError::TooFewPoints { distinct: 1 })
+        ));
         let line = cloud((0..20).map(|i| [i as f64, 2.0 * i as f64, 1.0]).collect());
-        assert!(matches!(clean_cloud(&line, &CleanParams::default()), Err(InputError::Collinear { n: 20 })));
-        let plane: Vec<Point3> = (0..100).map(|i| [(i % 10) as f64, (i / 10) as f64, 3.0]).collect();
-        assert!(matches!(clean_cloud(&cloud(plane.clone()), &CleanParams::default()), Err(InputError::Coplanar { .. })));
-        let with_normals = PointCloud { normals: Some(vec![[0.0, 0.0, 1.0]; 100]), points: plane };
+        assert!(matches!(
+            clean_cloud(&line, &CleanParams::default()),
+            Err(InputError::Collinear { n: 20 })
+        ));
+        let plane: Vec<Point3> = (0..100)
+            .map(|i| [(i % 10) as f64, (i / 10) as f64, 3.0])
+            .collect();
+        assert!(matches!(
+            clean_cloud(&cloud(plane.clone()), &CleanParams::default()),
+            Err(InputError::Coplanar { .. })
+        ));
+        let with_normals = PointCloud {
+            normals: Some(vec![[0.0, 0.0, 1.0]; 100]),
+            points: plane,
+        };
         assert!(clean_cloud(&with_normals, &CleanParams::default()).is_ok());
     }
 
     #[test]
     fn invalid_normals_are_counted() {
-        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-        let n = vec![[0.0, 0.0, 2.0], [0.0; 3], [f64::NAN, 0.0, 0.0], [1.0, 0.0, 0.0]];
-        let (c, s) = clean_cloud(&PointCloud { points: p, normals: Some(n) }, &CleanParams::default()).unwrap();
+        let p = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let n = vec![
+            [0.0, 0.0, 2.0],
+            [0.0; 3],
+            [f64::NAN, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+        ];
+        let (c, s) = clean_cloud(
+            &PointCloud {
+                points: p,
+                normals: Some(n),
+            },
+            &CleanParams::default(),
+        )
+        .unwrap();
         assert_eq!(s.invalid_normals, 2);
         assert_eq!(c.normals.unwrap()[0], [0.0, 0.0, 1.0]);
     }

@@ -5,8 +5,8 @@
 //! meshes are mapped back to input units on output.
 
 mod aabb;
-mod normalize;
 pub mod clean;
+mod normalize;
 pub mod pca;
 pub mod synthetic;
 

@@ -39,10 +39,15 @@ pub fn pca(points: &[Point3]) -> Pca {
         }
     }
     let (variances, axes) = symmetric_eigen3(m);
-    Pca { centroid, variances, axes }
+    Pca {
+        centroid,
+        variances,
+        axes,
+    }
 }
 
 /// Eigenvalues (descending) and unit eigenvectors of a symmetric 3×3 matrix.
+#[allow(clippy::needless_range_loop)] // index arithmetic mirrors the rotation formulas
 pub fn symmetric_eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point3; 3]) {
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _sweep in 0..64 {

@@ -37,9 +37,20 @@ impl Shape {
     /// Parse a command-line name: `sphere`, `torus`, `two-spheres` (unit-cube-sized defaults).
     pub fn by_name(name: &str) -> Option<Shape> {
         match name {
-            "sphere" => Some(Shape::Sphere { center: [0.5; 3], radius: 0.4 }),
-            "torus" => Some(Shape::Torus { center: [0.5; 3], major: 0.3, minor: 0.12 }),
-            "two-spheres" => Some(Shape::TwoSpheres { center: [0.5; 3], radius: 0.2, gap: 0.1 }),
+            "sphere" => Some(Shape::Sphere {
+                center: [0.5; 3],
+                radius: 0.4,
+            }),
+            "torus" => Some(Shape::Torus {
+                center: [0.5; 3],
+                major: 0.3,
+                minor: 0.12,
+            }),
+            "two-spheres" => Some(Shape::TwoSpheres {
+                center: [0.5; 3],
+                radius: 0.2,
+                gap: 0.1,
+            }),
             _ => None,
         }
     }
@@ -48,15 +59,29 @@ impl Shape {
     pub fn signed_distance(&self, p: &Point3) -> f64 {
         match *self {
             Shape::Sphere { center, radius } => super::norm(super::sub(*p, center)) - radius,
-            Shape::Torus { center, major, minor } => {
+            Shape::Torus {
+                center,
+                major,
+                minor,
+            } => {
                 let d = super::sub(*p, center);
                 let q = (d[0] * d[0] + d[1] * d[1]).sqrt() - major;
                 (q * q + d[2] * d[2]).sqrt() - minor
             }
-            Shape::TwoSpheres { center, radius, gap } => {
+            Shape::TwoSpheres {
+                center,
+                radius,
+                gap,
+            } => {
                 let off = radius + 0.5 * gap;
-                let a = Shape::Sphere { center: [center[0] - off, center[1], center[2]], radius };
-                let b = Shape::Sphere { center: [center[0] + off, center[1], center[2]], radius };
+                let a = Shape::Sphere {
+                    center: [center[0] - off, center[1], center[2]],
+                    radius,
+                };
+                let b = Shape::Sphere {
+                    center: [center[0] + off, center[1], center[2]],
+                    radius,
+                };
                 a.signed_distance(p).min(b.signed_distance(p))
             }
         }
@@ -86,11 +111,19 @@ impl Shape {
         while points.len() < n {
             let (p, nrm) = match *self {
                 Shape::Sphere { center, radius } => sphere_point(&mut rng, center, radius),
-                Shape::TwoSpheres { center, radius, gap } => {
+                Shape::TwoSpheres {
+                    center,
+                    radius,
+                    gap,
+                } => {
                     let off = if rng.next_f64() < 0.5 { -1.0 } else { 1.0 } * (radius + 0.5 * gap);
                     sphere_point(&mut rng, [center[0] + off, center[1], center[2]], radius)
                 }
-                Shape::Torus { center, major, minor } => {
+                Shape::Torus {
+                    center,
+                    major,
+                    minor,
+                } => {
                     // Rejection sampling on the tube angle for area uniformity (area ∝ major + minor cos v).
                     let u = rng.next_f64() * std::f64::consts::TAU;
                     let v = rng.next_f64() * std::f64::consts::TAU;
@@ -99,13 +132,23 @@ impl Shape {
                     }
                     let n = [v.cos() * u.cos(), v.cos() * u.sin(), v.sin()];
                     let r = major + minor * v.cos();
-                    ([center[0] + r * u.cos(), center[1] + r * u.sin(), center[2] + minor * v.sin()], n)
+                    (
+                        [
+                            center[0] + r * u.cos(),
+                            center[1] + r * u.sin(),
+                            center[2] + minor * v.sin(),
+                        ],
+                        n,
+                    )
                 }
             };
             points.push(p);
             normals.push(nrm);
         }
-        PointCloud { points, normals: Some(normals) }
+        PointCloud {
+            points,
+            normals: Some(normals),
+        }
     }
 }
 
@@ -150,7 +193,10 @@ mod tests {
                 assert!(s.signed_distance(p).abs() < 1e-12, "{name}");
                 assert!((super::super::norm(*n) - 1.0).abs() < 1e-12);
                 let out = [p[0] + 1e-4 * n[0], p[1] + 1e-4 * n[1], p[2] + 1e-4 * n[2]];
-                assert!(s.signed_distance(&out) > 0.0, "{name}: normal must point outwards");
+                assert!(
+                    s.signed_distance(&out) > 0.0,
+                    "{name}: normal must point outwards"
+                );
             }
         }
     }

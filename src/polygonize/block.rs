@@ -51,7 +51,12 @@ const TILE: usize = 4;
 
 /// Field values at the `dims` corners starting at grid corner `lo`, x fastest, evaluated in tiles of
 /// `TILE³` corners so an indexed field gathers its candidates once per tile.
-fn sample_corners(field: &dyn ScalarField, grid: &Grid, lo: [usize; 3], dims: [usize; 3]) -> Vec<f64> {
+fn sample_corners(
+    field: &dyn ScalarField,
+    grid: &Grid,
+    lo: [usize; 3],
+    dims: [usize; 3],
+) -> Vec<f64> {
     let mut values = vec![0.0; dims.iter().product()];
     let (mut pts, mut out, mut slots) = (Vec::new(), Vec::new(), Vec::new());
     for tk in (0..dims[2]).step_by(TILE) {

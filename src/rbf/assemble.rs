@@ -23,7 +23,8 @@ pub fn assemble_matrix(
     let r2 = support * support;
     let inv_r = 1.0 / support;
     const CHUNK: usize = 2048;
-    let chunks: Vec<Result<Vec<Vec<(usize, f64)>>, RbfError>> = (0..n.div_ceil(CHUNK))
+    type Column = Vec<(usize, f64)>;
+    let chunks: Vec<Result<Vec<Column>, RbfError>> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
             if progress.cancelled() {

@@ -12,8 +12,8 @@
 //!   same way). Needs normals; its zero set follows the data, so offsets are small and ears, handles
 //!   and concavities keep the right sign.
 
-use crate::geometry::{Aabb, Point3, dot, norm, normalized, pca::pca, sub};
 use super::Kernel;
+use crate::geometry::{Aabb, Point3, dot, norm, normalized, pca::pca, sub};
 use crate::spatial::SpatialIndex;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::sync::Arc;
@@ -66,7 +66,9 @@ impl std::str::FromStr for CarrierKind {
 #[non_exhaustive]
 pub enum CarrierError {
     /// `local` asked for but the input has no usable normals.
-    #[error("the local carrier needs oriented normals and the input has none: use --carrier ellipsoid or sphere")]
+    #[error(
+        "the local carrier needs oriented normals and the input has none: use --carrier ellipsoid or sphere"
+    )]
     NeedsNormals,
     /// The ellipsoid degenerates (points on a plane or line).
     #[error(
@@ -115,7 +117,11 @@ impl Carrier {
     pub fn value(&self, x: &Point3) -> f64 {
         match self {
             Carrier::Sphere { center, radius } => norm(sub(*x, *center)) - radius,
-            Carrier::Ellipsoid { center, axes, semi_axes } => {
+            Carrier::Ellipsoid {
+                center,
+                axes,
+                semi_axes,
+            } => {
                 let (q, _) = ellipsoid_local(x, center, axes, semi_axes);
                 min3(semi_axes) * (norm(q) - 1.0)
             }
@@ -127,7 +133,11 @@ impl Carrier {
     pub fn gradient(&self, x: &Point3) -> Point3 {
         match self {
             Carrier::Sphere { center, .. } => normalized(sub(*x, *center)).unwrap_or([0.0; 3]),
-            Carrier::Ellipsoid { center, axes, semi_axes } => {
+            Carrier::Ellipsoid {
+                center,
+                axes,
+                semi_axes,
+            } => {
                 let (q, _) = ellipsoid_local(x, center, axes, semi_axes);
                 let nq = norm(q);
                 if nq == 0.0 {
@@ -158,10 +168,24 @@ impl Carrier {
     /// Bounding box of the carrier's zero set when it is a closed analytic solid.
     pub fn zero_set_bounds(&self) -> Option<Aabb> {
         match self {
-            Carrier::Sphere { center, radius } => Some(Aabb { min: *center, max: *center }.inflated(*radius)),
-            Carrier::Ellipsoid { center, semi_axes, .. } => {
+            Carrier::Sphere { center, radius } => Some(
+                Aabb {
+                    min: *center,
+                    max: *center,
+                }
+                .inflated(*radius),
+            ),
+            Carrier::Ellipsoid {
+                center, semi_axes, ..
+            } => {
                 let a = semi_axes[0].max(semi_axes[1]).max(semi_axes[2]);
-                Some(Aabb { min: *center, max: *center }.inflated(a))
+                Some(
+                    Aabb {
+                        min: *center,
+                        max: *center,
+                    }
+                    .inflated(a),
+                )
             }
             Carrier::Local(_) => None,
         }
@@ -172,7 +196,12 @@ fn min3(a: &[f64; 3]) -> f64 {
     a[0].min(a[1]).min(a[2])
 }
 
-fn ellipsoid_local(x: &Point3, c: &Point3, axes: &[Point3; 3], semi: &[f64; 3]) -> (Point3, Point3) {
+fn ellipsoid_local(
+    x: &Point3,
+    c: &Point3,
+    axes: &[Point3; 3],
+    semi: &[f64; 3],
+) -> (Point3, Point3) {
     let d = sub(*x, *c);
     let u = [dot(d, axes[0]), dot(d, axes[1]), dot(d, axes[2])];
     ([u[0] / semi[0], u[1] / semi[1], u[2] / semi[2]], u)
@@ -214,7 +243,10 @@ pub fn fit_carrier(
 /// Least-squares (Kåsa) sphere; bounding sphere when the fit is degenerate.
 pub fn fit_sphere(points: &[Point3]) -> Carrier {
     let bbox = Aabb::from_points(points);
-    let fallback = Carrier::Sphere { center: bbox.center(), radius: 0.5 * bbox.diagonal() };
+    let fallback = Carrier::Sphere {
+        center: bbox.center(),
+        radius: 0.5 * bbox.diagonal(),
+    };
     // Normal equations of  2 c·P + d = |P|²  in unknowns (c, d), centred for conditioning.
     let o = bbox.center();
     let mut m = [[0.0f64; 5]; 4];
@@ -229,9 +261,14 @@ pub fn fit_sphere(points: &[Point3]) -> Carrier {
             m[a][4] += row[a] * rhs;
         }
     }
-    let Some(sol) = gauss4(m) else { return fallback };
+    let Some(sol) = gauss4(m) else {
+        return fallback;
+    };
     let center = [sol[0] + o[0], sol[1] + o[1], sol[2] + o[2]];
-    let ms: f64 = points.iter().map(|p| dot(sub(*p, center), sub(*p, center))).sum::<f64>();
+    let ms: f64 = points
+        .iter()
+        .map(|p| dot(sub(*p, center), sub(*p, center)))
+        .sum::<f64>();
     let radius = (ms / points.len() as f64).sqrt();
     if !radius.is_finite() || radius <= 0.0 || norm(sub(center, o)) > 10.0 * bbox.diagonal() {
         return fallback;
@@ -240,6 +277,7 @@ pub fn fit_sphere(points: &[Point3]) -> Carrier {
 }
 
 /// Solve a 4×4 system given as an augmented matrix; `None` when (nearly) singular.
+#[allow(clippy::needless_range_loop)] // Gauss–Jordan on a fixed-size matrix
 fn gauss4(mut m: [[f64; 5]; 4]) -> Option<[f64; 4]> {
     let scale = (0..4).map(|i| m[i][i].abs()).fold(0.0, f64::max);
     for col in 0..4 {
@@ -257,7 +295,12 @@ fn gauss4(mut m: [[f64; 5]; 4]) -> Option<[f64; 4]> {
             }
         }
     }
-    Some([m[0][4] / m[0][0], m[1][4] / m[1][1], m[2][4] / m[2][2], m[3][4] / m[3][3]])
+    Some([
+        m[0][4] / m[0][0],
+        m[1][4] / m[1][1],
+        m[2][4] / m[2][2],
+        m[3][4] / m[3][3],
+    ])
 }
 
 /// PCA ellipsoid.
@@ -267,7 +310,11 @@ pub fn fit_ellipsoid(points: &[Point3]) -> Result<Carrier, CarrierError> {
     if semi_axes[2] <= 1e-6 * semi_axes[0].max(f64::MIN_POSITIVE) {
         return Err(CarrierError::Degenerate { semi_axes });
     }
-    Ok(Carrier::Ellipsoid { center: p.centroid, axes: p.axes, semi_axes })
+    Ok(Carrier::Ellipsoid {
+        center: p.centroid,
+        axes: p.axes,
+        semi_axes,
+    })
 }
 
 /// Partition of unity of the tangent planes of the oriented points within the support radius `R`:
@@ -287,7 +334,10 @@ pub struct LocalCarrier {
 
 impl std::fmt::Debug for LocalCarrier {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("LocalCarrier").field("points", &self.points.len()).field("radius", &self.radius).finish()
+        f.debug_struct("LocalCarrier")
+            .field("points", &self.points.len())
+            .field("radius", &self.radius)
+            .finish()
     }
 }
 
@@ -300,14 +350,26 @@ impl LocalCarrier {
         radius: f64,
         index: Arc<dyn SpatialIndex + Send>,
     ) -> Option<Self> {
-        let normals: Vec<Point3> = normals.iter().map(|n| normalized(*n).unwrap_or([0.0; 3])).collect();
-        let valid_ids: Vec<u32> = (0..points.len() as u32).filter(|&i| normals[i as usize] != [0.0; 3]).collect();
+        let normals: Vec<Point3> = normals
+            .iter()
+            .map(|n| normalized(*n).unwrap_or([0.0; 3]))
+            .collect();
+        let valid_ids: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| normals[i as usize] != [0.0; 3])
+            .collect();
         if valid_ids.is_empty() || normals.len() != points.len() {
             return None;
         }
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
         let valid_tree = ImmutableKdTree::new_from_slice(&valid_points).ok()?;
-        Some(LocalCarrier { points: points.to_vec(), normals, radius, index, valid_tree, valid_ids })
+        Some(LocalCarrier {
+            points: points.to_vec(),
+            normals,
+            radius,
+            index,
+            valid_tree,
+            valid_ids,
+        })
     }
 
     /// Flip every normal (used when the input's normals turn out to point inwards).
@@ -351,14 +413,28 @@ impl LocalCarrier {
             return self.nearest_plane(x);
         }
         let g = swd / sw;
-        (g, [(sg[0] - g * sdw[0]) / sw, (sg[1] - g * sdw[1]) / sw, (sg[2] - g * sdw[2]) / sw])
+        (
+            g,
+            [
+                (sg[0] - g * sdw[0]) / sw,
+                (sg[1] - g * sdw[1]) / sw,
+                (sg[2] - g * sdw[2]) / sw,
+            ],
+        )
     }
 
     /// Signed distance to the tangent plane of the nearest point with a usable normal.
     fn nearest_plane(&self, x: &Point3) -> (f64, Point3) {
-        let nn = self.valid_tree.query(x).nearest_one::<SquaredEuclidean<f64>>().execute();
+        let nn = self
+            .valid_tree
+            .query(x)
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
         let j = self.valid_ids[nn.item as usize] as usize;
-        (dot(self.normals[j], sub(*x, self.points[j])), self.normals[j])
+        (
+            dot(self.normals[j], sub(*x, self.points[j])),
+            self.normals[j],
+        )
     }
 
     /// Support radius of the weights, normalised units.
@@ -385,15 +461,18 @@ mod tests {
     }
 
     fn local(p: &[Point3], n: &[Point3], r: f64) -> LocalCarrier {
-        let index: Arc<dyn SpatialIndex + Send> =
-            Arc::from(crate::spatial::build_index(p, crate::spatial::IndexKind::KdTree, 16).unwrap());
+        let index: Arc<dyn SpatialIndex + Send> = Arc::from(
+            crate::spatial::build_index(p, crate::spatial::IndexKind::KdTree, 16).unwrap(),
+        );
         LocalCarrier::new(p, n, r, index).unwrap()
     }
 
     #[test]
     fn sphere_fit_recovers_center_and_radius() {
         let (p, _) = sphere_points(500, [0.3, 0.5, 0.6], 0.25);
-        let Carrier::Sphere { center, radius } = fit_sphere(&p) else { panic!() };
+        let Carrier::Sphere { center, radius } = fit_sphere(&p) else {
+            panic!()
+        };
         assert!(norm(sub(center, [0.3, 0.5, 0.6])) < 1e-9);
         assert!((radius - 0.25).abs() < 1e-9);
     }
@@ -410,8 +489,13 @@ mod tests {
 
     #[test]
     fn flat_points_make_the_ellipsoid_refuse() {
-        let p: Vec<Point3> = (0..100).map(|i| [(i % 10) as f64, (i / 10) as f64, 0.0]).collect();
-        assert!(matches!(fit_ellipsoid(&p), Err(CarrierError::Degenerate { .. })));
+        let p: Vec<Point3> = (0..100)
+            .map(|i| [(i % 10) as f64, (i / 10) as f64, 0.0])
+            .collect();
+        assert!(matches!(
+            fit_ellipsoid(&p),
+            Err(CarrierError::Degenerate { .. })
+        ));
     }
 
     #[test]
@@ -419,7 +503,11 @@ mod tests {
         let (p, n) = sphere_points(800, [0.5; 3], 0.3);
         let carriers = [
             fit_sphere(&p),
-            Carrier::Ellipsoid { center: [0.5; 3], axes: [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.0, -0.8, 0.6]], semi_axes: [0.4, 0.3, 0.2] },
+            Carrier::Ellipsoid {
+                center: [0.5; 3],
+                axes: [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.0, -0.8, 0.6]],
+                semi_axes: [0.4, 0.3, 0.2],
+            },
             Carrier::Local(local(&p, &n, 0.08)),
         ];
         for c in &carriers {
@@ -432,7 +520,12 @@ mod tests {
                     b[k] -= h;
                     let fd = (c.value(&a) - c.value(&b)) / (2.0 * h);
                     let tol = 1e-5;
-                    assert!((fd - g[k]).abs() < tol, "{} k={k}: fd {fd} vs {}", c.name(), g[k]);
+                    assert!(
+                        (fd - g[k]).abs() < tol,
+                        "{} k={k}: fd {fd} vs {}",
+                        c.name(),
+                        g[k]
+                    );
                 }
             }
         }
@@ -442,12 +535,23 @@ mod tests {
     fn local_carrier_has_the_sign_of_the_solid() {
         let (p, n) = sphere_points(2000, [0.5; 3], 0.3);
         let c = local(&p, &n, 0.08);
-        for (x, inside) in [([0.5, 0.5, 0.5], true), ([0.5, 0.5, 0.75], true), ([0.5, 0.5, 0.85], false), ([0.0, 0.0, 0.0], false)] {
+        for (x, inside) in [
+            ([0.5, 0.5, 0.5], true),
+            ([0.5, 0.5, 0.75], true),
+            ([0.5, 0.5, 0.85], false),
+            ([0.0, 0.0, 0.0], false),
+        ] {
             let (g, _) = c.value_gradient(&x);
             assert_eq!(g < 0.0, inside, "g({x:?}) = {g}");
         }
-        let max_off = p.iter().map(|q| c.value_gradient(q).0.abs()).fold(0.0, f64::max);
+        let max_off = p
+            .iter()
+            .map(|q| c.value_gradient(q).0.abs())
+            .fold(0.0, f64::max);
         // Planes of a sphere of radius 0.3 blended over R = 0.08 miss the data by ~κR²/10.
-        assert!(max_off < 0.05 * 0.08, "offsets at the data should be small, got {max_off}");
+        assert!(
+            max_off < 0.05 * 0.08,
+            "offsets at the data should be small, got {max_off}"
+        );
     }
 }

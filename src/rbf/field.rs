@@ -48,11 +48,13 @@ impl RbfField {
     }
 
     fn poly_value(&self, x: &Point3) -> f64 {
-        self.polynomial.map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
+        self.polynomial
+            .map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
     }
 
     fn poly_gradient_norm(&self) -> f64 {
-        self.polynomial.map_or(0.0, |v| (v[1] * v[1] + v[2] * v[2] + v[3] * v[3]).sqrt())
+        self.polynomial
+            .map_or(0.0, |v| (v[1] * v[1] + v[2] * v[2] + v[3] * v[3]).sqrt())
     }
 }
 
@@ -65,7 +67,11 @@ impl ScalarField for RbfField {
 
     fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
         let mut hits = Vec::with_capacity(256);
-        self.index.within(&region.center(), 0.5 * region.diagonal() + self.support, &mut hits);
+        self.index.within(
+            &region.center(),
+            0.5 * region.diagonal() + self.support,
+            &mut hits,
+        );
         for (p, o) in points.iter().zip(out.iter_mut()) {
             *o = self.value_with(p, &hits);
         }
@@ -114,9 +120,21 @@ impl ScalarField for RbfField {
         let mut samples = vec![far(&c)];
         for corner in 0..8 {
             let p = [
-                if corner & 1 == 0 { cell.min[0] } else { cell.max[0] },
-                if corner & 2 == 0 { cell.min[1] } else { cell.max[1] },
-                if corner & 4 == 0 { cell.min[2] } else { cell.max[2] },
+                if corner & 1 == 0 {
+                    cell.min[0]
+                } else {
+                    cell.max[0]
+                },
+                if corner & 2 == 0 {
+                    cell.min[1]
+                } else {
+                    cell.max[1]
+                },
+                if corner & 4 == 0 {
+                    cell.min[2]
+                } else {
+                    cell.max[2]
+                },
             ];
             samples.push(far(&p));
         }

@@ -91,7 +91,9 @@ impl FromStr for Kernel {
         Kernel::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown kernel '{s}' (use wendland-c0, wendland-c2 or wendland-c4)"))
+            .ok_or_else(|| {
+                format!("unknown kernel '{s}' (use wendland-c0, wendland-c2 or wendland-c4)")
+            })
     }
 }
 
@@ -124,7 +126,10 @@ mod tests {
                 let h = 1e-6;
                 let fd = (k.value(r + h) - k.value(r - h)) / (2.0 * h);
                 let an = k.derivative_over_r(r) * r;
-                assert!((fd - an).abs() < 1e-6 * (1.0 + fd.abs()), "{k} r={r}: {fd} vs {an}");
+                assert!(
+                    (fd - an).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{k} r={r}: {fd} vs {an}"
+                );
             }
         }
     }

@@ -35,7 +35,11 @@ pub struct SupportEstimate {
 }
 
 /// Resolve `support` on `points` (sampling at most ~2000 of them; `O(s log n)`).
-pub fn estimate_support(points: &[Point3], index: &dyn SpatialIndex, support: Support) -> Result<SupportEstimate, super::RbfError> {
+pub fn estimate_support(
+    points: &[Point3],
+    index: &dyn SpatialIndex,
+    support: Support,
+) -> Result<SupportEstimate, super::RbfError> {
     let n = points.len();
     let step = (n / 2000).max(1);
     let sample: Vec<&Point3> = points.iter().step_by(step).collect();
@@ -71,7 +75,12 @@ pub fn estimate_support(points: &[Point3], index: &dyn SpatialIndex, support: Su
         })
         .sum();
     let mean_neighbours = total as f64 / sample.len().max(1) as f64;
-    Ok(SupportEstimate { radius, mean_neighbours, estimated_nnz: mean_neighbours * n as f64, spacing: median(&mut spacing) })
+    Ok(SupportEstimate {
+        radius,
+        mean_neighbours,
+        estimated_nnz: mean_neighbours * n as f64,
+        spacing: median(&mut spacing),
+    })
 }
 
 fn median(v: &mut [f64]) -> f64 {
