@@ -149,3 +149,145 @@ impl ReconParams {
         Ok(())
     }
 }
+
+/// The user-facing parameters, every one optional (`None` = the library default): one definition
+/// shared by the command line (flattened into `rbfsurf reconstruct`) and the HTTP API (query string
+/// or multipart fields, same kebab-case names). Converted and validated by
+/// `ReconParams::try_from(&ReconOptions)`.
+#[derive(Debug, Clone, Default, PartialEq, clap::Args, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct ReconOptions {
+    /// Kernel: wendland-c0 (seed), wendland-c2 (default), wendland-c4.
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub kernel: Option<Kernel>,
+    /// Support radius R in normalised units (the longest bbox edge is 1).
+    #[arg(long, conflicts_with = "neighbours", allow_negative_numbers = true)]
+    #[serde(default)]
+    pub support: Option<f64>,
+    /// Choose R to give about K neighbours per point (default 30).
+    #[arg(long)]
+    #[serde(default)]
+    pub neighbours: Option<usize>,
+    /// Carrier solid: auto (default: local with normals, else ellipsoid), sphere, ellipsoid, local.
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub carrier: Option<crate::rbf::CarrierKind>,
+    /// Matrix ordering: none, bfs (seed Algorithm III), rcm (default).
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub ordering: Option<OrderingKind>,
+    /// Solver: sparse (default, faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl).
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub solver: Option<SolverKind>,
+    /// Polynomial part: none (default) or linear (doubly bordered system).
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub polynomial: Option<Polynomial>,
+    /// Marching grid cells along the longest axis (default: from the point spacing, 64..320).
+    #[arg(long)]
+    #[serde(default)]
+    pub resolution: Option<usize>,
+    /// Spatial index: octree (default) or kdtree.
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub index: Option<IndexKind>,
+    /// Octree leaf size K (default 16).
+    #[arg(long)]
+    #[serde(default)]
+    pub leaf_size: Option<usize>,
+    /// Merge points closer than this fraction of the bbox diagonal (default 1e-6).
+    #[arg(long)]
+    #[serde(default)]
+    pub merge_tolerance: Option<f64>,
+    /// Memory budget for matrix + factor in MiB (default 8192); bigger systems are refused up front.
+    #[arg(long)]
+    #[serde(default)]
+    pub max_memory_mib: Option<u64>,
+}
+
+impl TryFrom<&ReconOptions> for ReconParams {
+    type Error = ParamError;
+    fn try_from(a: &ReconOptions) -> Result<Self, Self::Error> {
+        let d = ReconParams::default();
+        let support = match (a.support, a.neighbours) {
+            (Some(r), _) => Support::Radius(r),
+            (None, Some(k)) => Support::Neighbours(k),
+            (None, None) => d.support,
+        };
+        let p = ReconParams {
+            kernel: a.kernel.unwrap_or(d.kernel),
+            support,
+            carrier: a.carrier.map_or(d.carrier, |kind| CarrierParams { kind }),
+            index: a.index.unwrap_or(d.index),
+            leaf_size: a.leaf_size.unwrap_or(d.leaf_size),
+            ordering: a.ordering.unwrap_or(d.ordering),
+            solver: a.solver.unwrap_or(d.solver),
+            polynomial: a.polynomial.unwrap_or(d.polynomial),
+            resolution: a.resolution.or(d.resolution),
+            clean: CleanParams {
+                merge_tolerance: a.merge_tolerance.unwrap_or(d.clean.merge_tolerance),
+            },
+            max_memory_mib: a.max_memory_mib.unwrap_or(d.max_memory_mib),
+        };
+        p.validate()?;
+        Ok(p)
+    }
+}
+
+/// Serde adapter: an optional value written as its `Display` and read with `FromStr`
+/// (so the HTTP API accepts exactly the command line's spellings).
+mod from_str_opt {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use std::fmt::Display;
+    use std::str::FromStr;
+
+    pub fn serialize<T: Display, S: Serializer>(v: &Option<T>, s: S) -> Result<S::Ok, S::Error> {
+        match v {
+            Some(v) => s.collect_str(v),
+            None => s.serialize_none(),
+        }
+    }
+
+    pub fn deserialize<'de, T, D>(d: D) -> Result<Option<T>, D::Error>
+    where
+        T: FromStr,
+        T::Err: Display,
+        D: Deserializer<'de>,
+    {
+        Option::<String>::deserialize(d)?
+            .map(|s| s.parse::<T>().map_err(serde::de::Error::custom))
+            .transpose()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_map_to_params_with_defaults_and_validation() {
+        let p = ReconParams::try_from(&ReconOptions::default()).unwrap();
+        assert_eq!(p, ReconParams::default());
+        let o: ReconOptions = serde_json::from_str(
+            r#"{"kernel":"wendland-c4","support":0.1,"solver":"envelope","leaf-size":8}"#,
+        )
+        .unwrap();
+        let p = ReconParams::try_from(&o).unwrap();
+        assert_eq!(p.kernel, Kernel::WendlandC4);
+        assert_eq!(p.support, Support::Radius(0.1));
+        assert_eq!(p.solver, SolverKind::Envelope);
+        assert_eq!(p.leaf_size, 8);
+        assert!(serde_json::from_str::<ReconOptions>(r#"{"kernel":"gauss"}"#).is_err());
+        assert!(serde_json::from_str::<ReconOptions>(r#"{"bogus":1}"#).is_err());
+        let bad = ReconOptions {
+            resolution: Some(2),
+            ..Default::default()
+        };
+        assert_eq!(ReconParams::try_from(&bad).unwrap_err().name, "resolution");
+        let round: ReconOptions =
+            serde_json::from_str(&serde_json::to_string(&o).unwrap()).unwrap();
+        assert_eq!(round, o);
+    }
+}
