@@ -8,3 +8,4 @@ pub mod geometry;
 pub mod linalg;
 pub mod polygonize;
 pub mod progress;
+pub mod variational;

@@ -68,8 +68,16 @@ impl Aabb {
     /// The box grown by `margin` on every side.
     pub fn inflated(&self, margin: f64) -> Self {
         Aabb {
-            min: [self.min[0] - margin, self.min[1] - margin, self.min[2] - margin],
-            max: [self.max[0] + margin, self.max[1] + margin, self.max[2] + margin],
+            min: [
+                self.min[0] - margin,
+                self.min[1] - margin,
+                self.min[2] - margin,
+            ],
+            max: [
+                self.max[0] + margin,
+                self.max[1] + margin,
+                self.max[2] + margin,
+            ],
         }
     }
 

@@ -18,8 +18,15 @@ impl Normalization {
     pub fn from_aabb(bbox: &Aabb) -> Self {
         let e = bbox.extent();
         let longest = e[0].max(e[1]).max(e[2]);
-        let scale = if longest > 0.0 && longest.is_finite() { 1.0 / longest } else { 1.0 };
-        Normalization { offset: bbox.min, scale }
+        let scale = if longest > 0.0 && longest.is_finite() {
+            1.0 / longest
+        } else {
+            1.0
+        };
+        Normalization {
+            offset: bbox.min,
+            scale,
+        }
     }
 
     /// Input units → normalised units.
