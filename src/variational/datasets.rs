@@ -4,7 +4,7 @@
 //!   normals perpendicular to `c_{i−1} c_{i+1}` (Mann footnote 5), pointing outwards.
 //! - `koch0`…`koch4`: Koch snowflakes `K_k` (`3·4^k` points, unit edge for `K_0`) with bisector
 //!   normals (sum of the two unit edge normals). Mann's normal points at 1/3 of the edge length
-//!   are what the default pseudo-normal offset (`SpacingFraction(1/3)`) produces on them.
+//!   are `Offset::SpacingFraction(1/3)` on them (the spacing is the edge length).
 //! - `koch1-interior`, `koch2-interior`: Koch data with interior points only (Mann §2.2): one at the
 //!   centroid of `K_0` (value −1) and one at each triangle added at level `ℓ` (value `−3^{−ℓ}`).
 //! - `square`: `(±1, ±1)` with diagonal normals away from the origin (Mann §3.5).

@@ -21,7 +21,7 @@ use crate::polygonize::ScalarField;
 /// Parameters of the 3D variational fits (one nested struct per method).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct VariationalParams {
-    /// Turk–O'Brien parameters (default: pseudo-normals at 1/3 of the median spacing, `r³`).
+    /// Turk–O'Brien parameters (default: pseudo-normals at 0.1 of the median spacing, `r³`).
     pub turk_obrien: TurkObrienParams,
     /// Shen MLS parameters (default: linear basis, true normals, `ε = 0`).
     pub mls: MlsParams,

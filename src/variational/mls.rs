@@ -40,7 +40,7 @@ pub enum MlsBasis {
 /// How normals make the data non-zero.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MlsNormals {
-    /// Offset points on both sides (default offset 1/3 of the median spacing).
+    /// Offset points on both sides (default offset 0.1 of the median spacing).
     Pseudo(PseudoNormalParams),
     /// Shen's true-normal functions `S_i`.
     True,
@@ -86,7 +86,7 @@ impl MlsParams {
     /// Pseudo-normal placement Shen's method needs (both sides).
     pub fn pseudo_default() -> MlsNormals {
         MlsNormals::Pseudo(PseudoNormalParams {
-            offset: Offset::SpacingFraction(1.0 / 3.0),
+            offset: Offset::SpacingFraction(0.1),
             sides: Sides::Both,
         })
     }

@@ -47,7 +47,7 @@ pub struct CurveParams {
     pub epsilon: f64,
     /// Shen's weight exponent (default `Auto`: squared for true normals).
     pub weight: WeightPower,
-    /// Pseudo-normal offset (default 1/3 of the median data spacing).
+    /// Pseudo-normal offset (default 0.1 of the median data spacing).
     pub offset: Offset,
     /// Margin around the data's bounding box, as a fraction of its longest edge (default 0.25).
     pub margin: f64,
@@ -67,7 +67,7 @@ impl Default for CurveParams {
             grid: 200,
             epsilon: 0.0,
             weight: WeightPower::Auto,
-            offset: Offset::SpacingFraction(1.0 / 3.0),
+            offset: Offset::SpacingFraction(0.1),
             margin: 0.25,
             bounds: None,
             kappa_scale: 5.0,
@@ -277,4 +277,117 @@ pub fn run_workbench(
         timings_s,
     };
     Ok(WorkbenchOutput { svg, report, lines })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::variational::datasets;
+
+    fn run(name: &str, method: CurveMethod, f: impl Fn(&mut CurveParams)) -> WorkbenchOutput {
+        let mut p = CurveParams {
+            method,
+            grid: 120,
+            margin: 0.5,
+            ..Default::default()
+        };
+        f(&mut p);
+        run_workbench(&datasets::by_name(name).unwrap(), &p).unwrap()
+    }
+
+    /// Mann §3.1/§3.5 and Fig. 20/22: constant Shen with pseudo-normals does not give one closed
+    /// curve through the data (isolated zeros, or branches that bulge off to the sampling border)
+    /// and bulges far beyond the square; the linear variants give one closed loop.
+    #[test]
+    fn shen_constant_pseudo_fails_where_linear_does_not() {
+        for name in ["koch0", "square"] {
+            let c = run(name, CurveMethod::ShenConstant, |_| {}).report.quality;
+            let good =
+                c.components == 1 && c.closed_loops == 1 && c.interpolation_failures.is_empty();
+            assert!(!good, "{name}: {c:?}");
+            for m in [CurveMethod::ShenLinear, CurveMethod::ShenLinearNormals] {
+                let q = run(name, m, |_| {}).report.quality;
+                let good =
+                    q.components == 1 && q.closed_loops == 1 && q.interpolation_failures.is_empty();
+                assert!(good, "{name} {m:?}: {q:?}");
+            }
+        }
+        let square = |m| {
+            run("square", m, |p| {
+                p.bounds = Some(([-3.0, -3.0], [3.0, 3.0]));
+                p.offset = Offset::Normalized(0.05);
+            })
+            .report
+            .quality
+        };
+        let (c, l) = (
+            square(CurveMethod::ShenConstant),
+            square(CurveMethod::ShenLinear),
+        );
+        assert!(c.max_distance_to_data_polygon.unwrap() > 1.0, "{c:?}");
+        assert!(l.max_distance_to_data_polygon.unwrap() < 0.8, "{l:?}");
+    }
+
+    /// Mann §3.9: constant Shen concentrates curvature (lumpy); linear with true normals (our MLS
+    /// default) is the acceptable variant — one loop through all data on Shen's 27 points and K0–K3.
+    #[test]
+    fn shen_constant_is_lumpy_linear_true_normals_is_clean() {
+        let kmax = |q: &CurveQuality| q.curvature_max.abs().max(q.curvature_min.abs());
+        let c = run("shen27", CurveMethod::ShenConstant, |_| {})
+            .report
+            .quality;
+        let l = run("shen27", CurveMethod::ShenLinearNormals, |_| {})
+            .report
+            .quality;
+        assert!(kmax(&c) > 10.0 * kmax(&l), "{} vs {}", kmax(&c), kmax(&l));
+        for name in ["shen27", "koch0", "koch1", "koch2", "koch3", "circle8"] {
+            let q = run(name, CurveMethod::ShenLinearNormals, |_| {})
+                .report
+                .quality;
+            assert_eq!(
+                (q.components, q.closed_loops, q.extra_loops),
+                (1, 1, 0),
+                "{name}"
+            );
+            assert!(
+                q.interpolation_failures.is_empty() && q.max_abs_residual_at_data == 0.0,
+                "{name}"
+            );
+        }
+    }
+
+    /// Mann Fig. 21 and 27: with ε > 0 the constant curve grows past the data, the linear one
+    /// shrinks inside it.
+    #[test]
+    fn epsilon_grows_constant_and_shrinks_linear() {
+        let s = datasets::shen27();
+        let mean_f = |m| {
+            let p = CurveParams {
+                method: m,
+                epsilon: 0.15,
+                ..Default::default()
+            };
+            let f = fit_curve(&s, &p).unwrap().field;
+            s.iter().map(|x| f.value(&x.p)).sum::<f64>() / s.len() as f64
+        };
+        assert!(mean_f(CurveMethod::ShenConstant) < 0.0);
+        assert!(mean_f(CurveMethod::ShenLinear) > 0.0);
+    }
+
+    #[test]
+    fn report_serialises_and_bad_grid_is_an_error() {
+        let out = run("koch1", CurveMethod::TurkObrien, |_| {});
+        let j = serde_json::to_value(&out.report).unwrap();
+        assert_eq!(j["method"], "turk-obrien");
+        assert_eq!(j["quality"]["components"], 1);
+        assert!(j["solve"]["rcond"].as_f64().unwrap() > 0.0);
+        let p = CurveParams {
+            grid: 1,
+            ..Default::default()
+        };
+        assert!(matches!(
+            run_workbench(&datasets::koch(1), &p),
+            Err(VariationalError::InvalidParameter { name: "grid", .. })
+        ));
+    }
 }
