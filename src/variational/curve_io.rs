@@ -45,23 +45,23 @@ pub fn parse_curve(text: &str) -> Result<Vec<Sample<2>>, VariationalError> {
                 })
             })
             .collect::<Result<_, _>>()?;
-        let s = match nums.as_slice() {
-            &[x, y] => Sample {
+        let s = match *nums.as_slice() {
+            [x, y] => Sample {
                 p: [x, y],
                 normal: None,
                 value: 0.0,
             },
-            &[x, y, v] => Sample {
+            [x, y, v] => Sample {
                 p: [x, y],
                 normal: None,
                 value: v,
             },
-            &[x, y, nx, ny] => Sample {
+            [x, y, nx, ny] => Sample {
                 p: [x, y],
                 normal: Some([nx, ny]),
                 value: 0.0,
             },
-            &[x, y, nx, ny, v] => Sample {
+            [x, y, nx, ny, v] => Sample {
                 p: [x, y],
                 normal: Some([nx, ny]),
                 value: v,

@@ -12,6 +12,7 @@ use faer::linalg::solvers::{Lblt, Solve};
 use super::constraints::VariationalError;
 
 /// A factored symmetric system with its diagnostics.
+#[derive(Clone)]
 pub struct SymmetricSolver {
     factor: Lblt<f64>,
     n: usize,

@@ -117,7 +117,9 @@ impl ScalarField for VariationalField3 {
         let u = self.fit.frame.forward(&c);
         let rho = rho / self.fit.frame.scale;
         let f = self.fit.value_normalized(&u);
-        !(f.abs() > self.fit.variation_bound_normalized(&u, rho) * (1.0 + 1e-9))
+        let bound = self.fit.variation_bound_normalized(&u, rho) * (1.0 + 1e-9);
+        // NaN-safe: only a proven margin skips the cell.
+        f.abs().partial_cmp(&bound) != Some(std::cmp::Ordering::Greater)
     }
 }
 

@@ -32,6 +32,7 @@ use super::kernel::{RadialKernel, RbfExpansion};
 use super::turk_obrien::value_matrix;
 
 /// A solved value-constraint system that accepts more constraints cheaply.
+#[derive(Clone)]
 pub struct IncrementalSystem<const D: usize> {
     kernel: RadialKernel,
     base: Vec<ValueConstraint<D>>,
