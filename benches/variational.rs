@@ -6,7 +6,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use rbfsurf::variational::marching_squares::{Grid2, MarchingParams, contour};
-use rbfsurf::variational::workbench::{fit_curve, grid_for};
+use rbfsurf::variational::workbench::{contour_field, fit_curve, grid_for};
 use rbfsurf::variational::{
     CurveMethod, CurveParams, ImplicitField, IncrementalSystem, Offset, Origin, RadialKernel,
     TurkObrienParams, ValueConstraint, datasets, fit_turk_obrien,
@@ -42,6 +42,12 @@ fn turk_obrien_k4(c: &mut Criterion) {
             )
         })
     });
+    g.bench_function("fit+contour200_blocked", |b| {
+        b.iter(|| {
+            let fit = fit_turk_obrien(black_box(&s), &TurkObrienParams::default()).unwrap();
+            contour_field(&fit, &grid)
+        })
+    });
     g.finish();
 }
 
@@ -68,11 +74,7 @@ fn shen_square(c: &mut Criterion) {
         g.bench_function(format!("{m:?}"), |b| {
             b.iter(|| {
                 let f = fit_curve(black_box(&s), &p).unwrap().field;
-                contour(
-                    &|x: &[f64; 2]| f.value(x),
-                    &grid,
-                    &MarchingParams::default(),
-                )
+                contour_field(f.as_ref(), &grid)
             })
         });
     }

@@ -77,6 +77,58 @@ pub fn sample_grid(field: &(dyn Fn(&[f64; 2]) -> f64 + Sync), grid: &Grid2) -> V
     v
 }
 
+/// Node values like [`sample_grid`], but blocks of `block × block` cells on which `sign_test`
+/// proves one sign (`Some(f(centre))` for the ball around the block centre) are not sampled:
+/// their nodes get the centre value (right sign, never interpolated, because no cell of such a
+/// block has a sign change). Nodes shared with an unproven block are always evaluated.
+pub fn sample_grid_blocked(
+    field: &(dyn Fn(&[f64; 2]) -> f64 + Sync),
+    sign_test: &(dyn Fn(&[f64; 2], f64) -> Option<f64> + Sync),
+    grid: &Grid2,
+    block: usize,
+) -> Vec<f64> {
+    let b = block.max(1);
+    let (bx, by) = (grid.nx.div_ceil(b), grid.ny.div_ceil(b));
+    let proven: Vec<Option<f64>> = (0..bx * by)
+        .into_par_iter()
+        .map(|k| {
+            let (i0, j0) = ((k % bx) * b, (k / bx) * b);
+            let (i1, j1) = ((i0 + b).min(grid.nx), (j0 + b).min(grid.ny));
+            let (lo, hi) = (grid.node(i0, j0), grid.node(i1, j1));
+            let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+            sign_test(&c, 0.5 * (hi[0] - lo[0]).hypot(hi[1] - lo[1]))
+        })
+        .collect();
+    let w = grid.nx + 1;
+    let mut v = vec![0.0; w * (grid.ny + 1)];
+    v.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
+        for (i, x) in row.iter_mut().enumerate() {
+            let blocks_i = [i.saturating_sub(1) / b, (i / b).min(bx - 1)];
+            let blocks_j = [j.saturating_sub(1) / b, (j / b).min(by - 1)];
+            let mut placeholder = None;
+            let mut all_proven = true;
+            for bj in blocks_j {
+                for bi in blocks_i {
+                    // Only blocks that actually contain node (i, j).
+                    let contains = (bi * b..=(bi * b + b)).contains(&i)
+                        && (bj * b..=(bj * b + b)).contains(&j);
+                    if contains {
+                        match proven[bj * bx + bi] {
+                            Some(f) => placeholder = Some(f),
+                            None => all_proven = false,
+                        }
+                    }
+                }
+            }
+            *x = match (all_proven, placeholder) {
+                (true, Some(f)) => f,
+                _ => field(&grid.node(i, j)),
+            };
+        }
+    });
+    v
+}
+
 /// Contour the zero set of `field` over `grid`.
 ///
 /// ```
@@ -326,6 +378,35 @@ mod tests {
         let c = contour(&f, &g, &MarchingParams::default());
         assert_eq!(c.iter().filter(|p| p.closed).count(), 2);
         assert_eq!(c.iter().filter(|p| !p.closed).count(), 1);
+    }
+
+    #[test]
+    fn blocked_sampling_gives_the_same_contour() {
+        let g = Grid2 {
+            min: [-1.5, -1.3],
+            max: [1.7, 1.5],
+            nx: 64,
+            ny: 56,
+        };
+        let f = |p: &[f64; 2]| p[0].hypot(p[1]) - 1.0;
+        // |∇f| = 1, so the sign is proven when |f(c)| > ρ.
+        let test = |c: &[f64; 2], rho: f64| {
+            let v = f(c);
+            (v.abs() > rho).then_some(v)
+        };
+        let full = sample_grid(&f, &g);
+        let blocked = sample_grid_blocked(&f, &test, &g, 8);
+        let same_sign = full
+            .iter()
+            .zip(&blocked)
+            .all(|(a, b)| (*a < 0.0) == (*b < 0.0));
+        assert!(same_sign);
+        assert!(full.iter().zip(&blocked).filter(|(a, b)| a != b).count() > 100);
+        let p = MarchingParams::default();
+        assert_eq!(
+            contour_values(&f, &full, &g, &p),
+            contour_values(&f, &blocked, &g, &p)
+        );
     }
 
     #[test]

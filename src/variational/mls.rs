@@ -286,6 +286,11 @@ impl<const D: usize> ImplicitField<D> for MlsField<D> {
             (self.value_normalized(&a) - self.value_normalized(&b)) / (2.0 * h * self.frame.scale)
         })
     }
+
+    fn sign_on_ball(&self, x: &[f64; D], rho: f64) -> Option<f64> {
+        let u = self.frame.forward(x);
+        (!self.may_change_sign(&u, rho / self.frame.scale)).then(|| self.value_normalized(&u))
+    }
 }
 
 /// Solve the `m × m` system in place (Jacobi scaling + partial pivoting); `None` if singular.

@@ -43,6 +43,11 @@ pub trait ImplicitField<const D: usize>: Sync {
     fn value(&self, x: &[f64; D]) -> f64;
     /// `∇f(x)`.
     fn gradient(&self, x: &[f64; D]) -> [f64; D];
+    /// `Some(f(x))` when `f` provably keeps the sign of `f(x)` on the ball of radius `rho`
+    /// around `x` (input units); `None` when it may change sign or no bound is known (default).
+    fn sign_on_ball(&self, _x: &[f64; D], _rho: f64) -> Option<f64> {
+        None
+    }
 }
 
 /// Similarity map to normalised coordinates: `u = (x − centre) / scale`.

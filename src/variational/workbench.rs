@@ -10,7 +10,9 @@ use super::ImplicitField;
 use super::constraints::{
     Offset, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
-use super::marching_squares::{Grid2, MarchingParams, Polyline, contour};
+use super::marching_squares::{
+    Grid2, MarchingParams, Polyline, contour_values, sample_grid_blocked,
+};
 use super::mls::{MlsBasis, MlsNormals, MlsParams, WeightPower, fit_mls};
 use super::quality::{CurveQuality, analyse, curvatures};
 use super::svg::{SvgInput, render};
@@ -227,6 +229,15 @@ pub fn grid_for(samples: &[Sample<2>], p: &CurveParams) -> Result<Grid2, Variati
     })
 }
 
+/// Contour a field over `grid`, skipping 8 × 8-cell blocks where the field proves its sign
+/// ([`ImplicitField::sign_on_ball`]).
+pub fn contour_field(field: &dyn ImplicitField<2>, grid: &Grid2) -> Vec<Polyline> {
+    let f = |x: &[f64; 2]| field.value(x);
+    let test = |c: &[f64; 2], rho: f64| field.sign_on_ball(c, rho);
+    let values = sample_grid_blocked(&f, &test, grid, 8);
+    contour_values(&f, &values, grid, &MarchingParams::default())
+}
+
 /// Fit, contour, analyse and draw.
 ///
 /// ```
@@ -244,7 +255,7 @@ pub fn run_workbench(
     let t1 = Instant::now();
     let grid = grid_for(samples, p)?;
     let field = |x: &[f64; 2]| fitted.field.value(x);
-    let lines = contour(&field, &grid, &MarchingParams::default());
+    let lines = contour_field(fitted.field.as_ref(), &grid);
     let t2 = Instant::now();
     let frame = Frame::of_points(samples.iter().map(|s| s.p));
     let kappa = curvatures(&field, &lines, 1e-4 * frame.scale);
