@@ -23,6 +23,7 @@ pub mod progress;
 pub mod rbf;
 pub mod report;
 pub mod spatial;
+pub mod variational;
 
 pub use error::ReconError;
 pub use params::ReconParams;

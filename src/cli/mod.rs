@@ -3,6 +3,7 @@
 
 mod bench;
 mod compare;
+mod curve;
 mod generate;
 pub mod progress;
 mod reconstruct;
@@ -27,6 +28,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Write a synthetic point set with normals (sphere, torus, two-spheres) as PLY.
     Generate(generate::GenerateArgs),
+    /// 2D implicit curves workbench: fit constraints (x y [nx ny] [value]) and write an SVG + JSON report.
+    Curve(curve::CurveArgs),
     /// Run a benchmark and print a table (`table1`: the seed's Table 1; `scaling`: N = 10k..300k).
     Bench(bench::BenchArgs),
 }
@@ -60,6 +63,7 @@ where
         Command::Compare(a) => compare::run(&a),
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
+        Command::Curve(a) => curve::run(&a),
     };
     match result {
         Ok(()) => 0,
