@@ -9,7 +9,7 @@
 use super::ScalarField;
 use super::grid::Grid;
 use super::kuhn::{CubeEdge, TETS, TetCase};
-use crate::geometry::{Point3, add, normalized, scale, sub};
+use crate::geometry::{Aabb, Point3, add, normalized, scale, sub};
 
 /// The triangles and vertices of one block, with block-local vertex indices.
 #[derive(Debug, Default)]
@@ -46,42 +46,84 @@ struct Block<'a> {
     out: BlockMesh,
 }
 
-/// Corners per axis of the tiles that [`ScalarField::values_in`] evaluates together.
+/// Cells per axis of the tiles a block is sampled in.
 const TILE: usize = 4;
 
-/// Field values at the `dims` corners starting at grid corner `lo`, x fastest, evaluated in tiles of
-/// `TILE³` corners so an indexed field gathers its candidates once per tile.
+/// Field values at the `dims` corners starting at grid corner `lo`, x fastest, plus the number of
+/// field evaluations spent.
+///
+/// The block is cut into tiles of `TILE³` cells. A tile the field rules out
+/// (`may_contain_zero(tile) == false`, so `f` has one sign on the closed tile) is not sampled: its
+/// corners get the value at the tile's centre, which has that sign. Only edges with a sign change are
+/// interpolated, and no such edge lies in a ruled-out tile, so these stand-in values are never used
+/// for geometry. Corners of the other tiles are evaluated with [`ScalarField::values_in`], once each.
 fn sample_corners(
     field: &dyn ScalarField,
     grid: &Grid,
     lo: [usize; 3],
     dims: [usize; 3],
-) -> Vec<f64> {
-    let mut values = vec![0.0; dims.iter().product()];
+) -> (Vec<f64>, u64) {
+    let mut values = vec![f64::NAN; dims.iter().product()];
+    let idx = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
+    let tiles = [0, 1, 2].map(|a| (dims[a] - 1).div_ceil(TILE).max(1));
+    let mut skipped = Vec::new();
     let (mut pts, mut out, mut slots) = (Vec::new(), Vec::new(), Vec::new());
-    for tk in (0..dims[2]).step_by(TILE) {
-        for tj in (0..dims[1]).step_by(TILE) {
-            for ti in (0..dims[0]).step_by(TILE) {
-                pts.clear();
-                slots.clear();
-                for k in tk..(tk + TILE).min(dims[2]) {
-                    for j in tj..(tj + TILE).min(dims[1]) {
-                        for i in ti..(ti + TILE).min(dims[0]) {
-                            pts.push(grid.corner([lo[0] + i, lo[1] + j, lo[2] + k]));
-                            slots.push(i + dims[0] * (j + dims[1] * k));
-                        }
+    let mut evaluations = 0u64;
+    for t in 0..tiles[0] * tiles[1] * tiles[2] {
+        let t3 = [
+            t % tiles[0],
+            (t / tiles[0]) % tiles[1],
+            t / (tiles[0] * tiles[1]),
+        ];
+        let c0 = t3.map(|a| a * TILE);
+        let c1 = [0, 1, 2].map(|a| (c0[a] + TILE).min(dims[a] - 1));
+        let region = Aabb {
+            min: grid.corner([lo[0] + c0[0], lo[1] + c0[1], lo[2] + c0[2]]),
+            max: grid.corner([lo[0] + c1[0], lo[1] + c1[1], lo[2] + c1[2]]),
+        };
+        if !field.may_contain_zero(&region) {
+            skipped.push((c0, c1, region.center()));
+            continue;
+        }
+        pts.clear();
+        slots.clear();
+        for k in c0[2]..=c1[2] {
+            for j in c0[1]..=c1[1] {
+                for i in c0[0]..=c1[0] {
+                    if values[idx(i, j, k)].is_nan() {
+                        pts.push(grid.corner([lo[0] + i, lo[1] + j, lo[2] + k]));
+                        slots.push(idx(i, j, k));
                     }
                 }
-                let region = crate::geometry::Aabb::from_points(&pts);
-                out.resize(pts.len(), 0.0);
-                field.values_in(&region, &pts, &mut out);
-                for (&s, &v) in slots.iter().zip(&out) {
-                    values[s] = v;
+            }
+        }
+        out.resize(pts.len(), 0.0);
+        field.values_in(&region, &pts, &mut out);
+        evaluations += pts.len() as u64;
+        for (&s, &v) in slots.iter().zip(&out) {
+            // A NaN from the field is stored as +inf: outside, and never re-evaluated.
+            values[s] = if v.is_nan() { f64::INFINITY } else { v };
+        }
+    }
+    for (c0, c1, centre) in skipped {
+        let v = field.value(&centre);
+        let v = if v.is_nan() || v == 0.0 {
+            f64::INFINITY
+        } else {
+            v
+        };
+        evaluations += 1;
+        for k in c0[2]..=c1[2] {
+            for j in c0[1]..=c1[1] {
+                for i in c0[0]..=c1[0] {
+                    if values[idx(i, j, k)].is_nan() {
+                        values[idx(i, j, k)] = v;
+                    }
                 }
             }
         }
     }
-    values
+    (values, evaluations)
 }
 
 /// Extracts the zero set inside block `b` of `grid`.
@@ -94,8 +136,7 @@ pub(crate) fn extract_block(
 ) -> BlockMesh {
     let (lo, hi) = grid.block_cells(b);
     let dims = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-    let values = sample_corners(field, grid, lo, dims);
-    let evaluations = values.len() as u64;
+    let (values, evaluations) = sample_corners(field, grid, lo, dims);
     let first = values.first().is_some_and(|&f| inside(f));
     if values.iter().all(|&f| inside(f) == first) {
         return BlockMesh {
