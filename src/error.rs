@@ -25,6 +25,9 @@ pub enum ReconError {
     /// Mesh extraction failed.
     #[error(transparent)]
     Polygonize(#[from] crate::polygonize::PolygonizeError),
+    /// A global (variational / MLS) fit failed.
+    #[error(transparent)]
+    Variational(#[from] crate::variational::VariationalError),
     /// Mesh post-processing failed.
     #[error(transparent)]
     Mesh(#[from] crate::mesh::optimize::OptimizeError),

@@ -38,9 +38,51 @@ impl std::fmt::Display for Polynomial {
     }
 }
 
+/// Which implicit fit to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Carrier + compactly supported Wendland spline (sparse; scales to large N).
+    #[default]
+    Csrbf,
+    /// Turk–O'Brien variational implicit (`r³`, dense; small N, up to ~5k points).
+    Variational,
+    /// Shen's MLS implicit (linear basis, true normals; `O(N)` per evaluation).
+    Mls,
+}
+
+impl Method {
+    /// Command-line / report name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Csrbf => "csrbf",
+            Method::Variational => "variational",
+            Method::Mls => "mls",
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        [Method::Csrbf, Method::Variational, Method::Mls]
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown method '{s}' (use csrbf, variational or mls)"))
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Everything that steers a reconstruction.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReconParams {
+    /// Implicit fit (default `csrbf`).
+    pub method: Method,
     /// Wendland kernel (default `wendland-c2`).
     pub kernel: Kernel,
     /// Support radius or target neighbour count (default 30 neighbours).
@@ -69,6 +111,7 @@ pub struct ReconParams {
 impl Default for ReconParams {
     fn default() -> Self {
         ReconParams {
+            method: Method::Csrbf,
             kernel: Kernel::default(),
             support: Support::default(),
             carrier: CarrierParams::default(),
@@ -157,6 +200,10 @@ impl ReconParams {
 #[derive(Debug, Clone, Default, PartialEq, clap::Args, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub struct ReconOptions {
+    /// Method: csrbf (default), variational (Turk–O'Brien r³, dense, ≤ ~5k points), mls (Shen).
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub method: Option<Method>,
     /// Kernel: wendland-c0 (seed), wendland-c2 (default), wendland-c4.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
@@ -217,6 +264,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             (None, None) => d.support,
         };
         let p = ReconParams {
+            method: a.method.unwrap_or(d.method),
             kernel: a.kernel.unwrap_or(d.kernel),
             support,
             carrier: a.carrier.map_or(d.carrier, |kind| CarrierParams { kind }),

@@ -200,11 +200,34 @@ fn cancellation_stops_the_work() {
 fn planar_points_with_a_linear_polynomial_are_refused_as_singular() {
     // A flat patch with normals is accepted (the local carrier orients it), but the linear polynomial
     // cannot be determined on a plane: the 4×4 border is singular.
-    let points: Vec<[f64; 3]> = (0..400).map(|i| [(i % 20) as f64 * 0.05, (i / 20) as f64 * 0.05, 0.3]).collect();
-    let cloud = PointCloud { normals: Some(vec![[0.0, 0.0, 1.0]; points.len()]), points };
-    let p = ReconParams { polynomial: Polynomial::Linear, resolution: Some(32), ..Default::default() };
-    let err = reconstruct(&cloud, &p, &NoProgress).err().expect("singular border");
+    let points: Vec<[f64; 3]> = (0..400)
+        .map(|i| [(i % 20) as f64 * 0.05, (i / 20) as f64 * 0.05, 0.3])
+        .collect();
+    let cloud = PointCloud {
+        normals: Some(vec![[0.0, 0.0, 1.0]; points.len()]),
+        points,
+    };
+    let p = ReconParams {
+        polynomial: Polynomial::Linear,
+        resolution: Some(32),
+        ..Default::default()
+    };
+    let err = reconstruct(&cloud, &p, &NoProgress)
+        .err()
+        .expect("singular border");
     assert!(err.to_string().contains("coplanar"), "{err}");
-    let open = reconstruct(&cloud, &ReconParams { resolution: Some(32), ..Default::default() }, &NoProgress).unwrap();
-    assert!(!open.report.mesh.watertight && open.report.mesh.components == 1, "{:?}", open.report.mesh);
+    let open = reconstruct(
+        &cloud,
+        &ReconParams {
+            resolution: Some(32),
+            ..Default::default()
+        },
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        !open.report.mesh.watertight && open.report.mesh.components == 1,
+        "{:?}",
+        open.report.mesh
+    );
 }

@@ -1,0 +1,190 @@
+//! The CSRBF fit (the seed's method): index → support → carrier → assemble → order → factor → solve.
+
+use super::{FittedField, check_cancel, clean_and_normalize, residual_at};
+use crate::error::ReconError;
+use crate::geometry::{Aabb, Point3, PointCloud};
+use crate::linalg::{SolverParams, factorize, solve_bordered};
+use crate::ordering::{compute_ordering, matrix_shape};
+use crate::params::{Polynomial, ReconParams};
+use crate::progress::Progress;
+use crate::rbf::{
+    Carrier, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support, fit_carrier,
+};
+use crate::report::{MatrixReport, Timings};
+use crate::spatial::{SpatialIndex, build_index};
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Clean, normalise and fit: everything up to the solved field and its residual.
+pub fn fit_field(
+    cloud: &PointCloud,
+    params: &ReconParams,
+    progress: &dyn Progress,
+    timings: &mut Timings,
+) -> Result<FittedField, ReconError> {
+    let (clean, clean_stats, normalization, points) =
+        clean_and_normalize(cloud, params, progress, timings)?;
+
+    progress.stage("index");
+    let t = Instant::now();
+    let index: Arc<dyn SpatialIndex + Send> =
+        Arc::from(build_index(&points, params.index, params.leaf_size)?);
+    let support = estimate_support(&points, index.as_ref(), params.support)?;
+    check_memory(&support, points.len(), params.max_memory_mib)?;
+    timings.index = t.elapsed().as_secs_f64();
+
+    progress.stage("carrier");
+    let t = Instant::now();
+    let (carrier, normals_flipped) = fit_oriented_carrier(
+        &points,
+        clean.normals.as_deref(),
+        params,
+        support.radius,
+        &index,
+    )?;
+    let rhs: Vec<f64> = points.par_iter().map(|p| -carrier.value(p)).collect();
+    timings.carrier = t.elapsed().as_secs_f64();
+    check_cancel(progress)?;
+
+    progress.stage("assemble");
+    let t = Instant::now();
+    let a = assemble_matrix(
+        &points,
+        index.as_ref(),
+        params.kernel,
+        support.radius,
+        progress,
+    )?;
+    timings.assemble = t.elapsed().as_secs_f64();
+
+    progress.stage("order");
+    let t = Instant::now();
+    let perm = compute_ordering(params.ordering, &points, support.radius, &a, None)?;
+    let shape = matrix_shape(&a, &perm)?;
+    timings.order = t.elapsed().as_secs_f64();
+    check_cancel(progress)?;
+
+    progress.stage("factor");
+    let t = Instant::now();
+    let budget_values =
+        (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
+    let solver = SolverParams {
+        kind: params.solver,
+        max_factor_values: budget_values,
+    };
+    let (factor, fstats) = factorize(&a, Some(&perm.perm), &solver, progress)?;
+    timings.factor = t.elapsed().as_secs_f64();
+
+    progress.stage("solve");
+    let t = Instant::now();
+    let (weights, polynomial) = match params.polynomial {
+        Polynomial::None => {
+            let mut x = rhs.clone();
+            factor.solve_in_place(&mut x);
+            (x, None)
+        }
+        Polynomial::Linear => {
+            let poly: Vec<[f64; 4]> = points.iter().map(|p| [1.0, p[0], p[1], p[2]]).collect();
+            let (x, v) = solve_bordered(factor.as_ref(), &poly, &rhs)?;
+            (x, Some(v))
+        }
+    };
+    timings.solve = t.elapsed().as_secs_f64();
+    let matrix = MatrixReport {
+        n: shape.n,
+        nnz: shape.nnz,
+        bandwidth: shape.bandwidth,
+        profile_values: shape.profile_values,
+        dense_values: shape.dense_values,
+        factor_values: fstats.factor_values,
+    };
+    drop(factor);
+    drop(a);
+    let carrier_name = carrier.name();
+    let carrier_bounds = carrier.zero_set_bounds();
+    let field = RbfField {
+        centres: points.clone(),
+        weights,
+        polynomial,
+        kernel: params.kernel,
+        support: support.radius,
+        carrier,
+        index,
+    };
+    let t = Instant::now();
+    let residual = residual_at(&field, &points);
+    timings.residual = t.elapsed().as_secs_f64();
+    Ok(FittedField {
+        field: Box::new(field),
+        method: "csrbf",
+        support_radius: support.radius,
+        carrier: carrier_name,
+        carrier_bounds,
+        normalization,
+        points,
+        clean: clean_stats,
+        support,
+        matrix,
+        residual,
+        normals_flipped,
+    })
+}
+
+/// Refuse before assembly when the matrix alone (values + indices, twice during assembly) would not fit.
+fn check_memory(s: &SupportEstimate, n: usize, budget_mib: u64) -> Result<(), RbfError> {
+    let mib = s.estimated_nnz * 32.0 / (1u64 << 20) as f64;
+    if mib > budget_mib as f64 {
+        return Err(RbfError::TooLarge {
+            support: s.radius,
+            neighbours: s.mean_neighbours,
+            n,
+            nnz: s.estimated_nnz,
+            mib,
+            budget_mib,
+        });
+    }
+    Ok(())
+}
+
+/// Fit the carrier; a local carrier whose normals point inwards (negative far outside) is flipped.
+fn fit_oriented_carrier(
+    points: &[Point3],
+    normals: Option<&[Point3]>,
+    params: &ReconParams,
+    radius: f64,
+    index: &Arc<dyn SpatialIndex + Send>,
+) -> Result<(Carrier, bool), ReconError> {
+    let mut carrier = fit_carrier(points, normals, &params.carrier, radius, index)?;
+    let mut flipped = false;
+    if let Carrier::Local(local) = &mut carrier {
+        let outer = Aabb::from_points(points).inflated(0.25);
+        let negatives = (0..8)
+            .filter(|c| {
+                let p = [
+                    if c & 1 == 0 {
+                        outer.min[0]
+                    } else {
+                        outer.max[0]
+                    },
+                    if c & 2 == 0 {
+                        outer.min[1]
+                    } else {
+                        outer.max[1]
+                    },
+                    if c & 4 == 0 {
+                        outer.min[2]
+                    } else {
+                        outer.max[2]
+                    },
+                ];
+                local.value_gradient(&p).0 < 0.0
+            })
+            .count();
+        if negatives > 4 {
+            local.flip_normals();
+            flipped = true;
+        }
+    }
+    Ok((carrier, flipped))
+}
