@@ -15,6 +15,7 @@ pub mod geometry;
 pub mod io;
 pub mod linalg;
 pub mod mesh;
+pub mod normals;
 pub mod ordering;
 pub mod params;
 pub mod pipeline;

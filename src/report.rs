@@ -52,6 +52,8 @@ pub struct ParamsReport {
     pub index: String,
     /// Whether input normals were flipped because they pointed inwards.
     pub normals_flipped: bool,
+    /// Where the normals came from: `input`, `estimated` (PCA + MST orientation) or `none`.
+    pub normals: &'static str,
 }
 
 /// Linear system statistics (seed Table 1 columns).

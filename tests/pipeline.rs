@@ -231,3 +231,41 @@ fn planar_points_with_a_linear_polynomial_are_refused_as_singular() {
         open.report.mesh
     );
 }
+
+#[test]
+fn clouds_without_normals_get_estimated_oriented_normals() {
+    let shape = Shape::by_name("torus").unwrap();
+    let mut cloud = shape.sample(6000, 21);
+    cloud.normals = None;
+    let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    check_closed("torus without normals", &rec, 1, 1);
+    assert_eq!(rec.report.params.normals, "estimated");
+    assert_eq!(rec.report.params.carrier, "local");
+    let err = common::max_vertex_error(&rec.mesh, |p| shape.signed_distance(p));
+    assert!(err < 0.01, "max vertex error {err}");
+}
+
+#[test]
+fn estimated_normals_agree_with_the_bunny_scan_normals() {
+    use rbfsurf::normals::{NormalParams, estimate_oriented_normals};
+    let cloud =
+        rbfsurf::io::read_point_cloud(&common::data("bunny_cgal_10k.ply"), &Default::default())
+            .unwrap();
+    let truth = cloud.normals.as_ref().unwrap();
+    let est = estimate_oriented_normals(&cloud.points, &NormalParams::default());
+    let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let flips = est
+        .iter()
+        .zip(truth)
+        .filter(|(a, b)| dot(a, b) < 0.0)
+        .count();
+    eprintln!(
+        "bunny 10k: {flips} of {} estimated normals flipped",
+        est.len()
+    );
+    // Allow a handful at the ear tips.
+    assert!(
+        flips <= 10,
+        "{flips} of 10000 estimated normals point the wrong way"
+    );
+}

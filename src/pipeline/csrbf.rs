@@ -4,11 +4,13 @@ use super::{FittedField, check_cancel, clean_and_normalize, residual_at};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverParams, factorize, solve_bordered};
+use crate::normals::{NormalParams, estimate_oriented_normals};
 use crate::ordering::{compute_ordering, matrix_shape};
 use crate::params::{Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
-    Carrier, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support, fit_carrier,
+    Carrier, CarrierKind, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support,
+    fit_carrier,
 };
 use crate::report::{MatrixReport, Timings};
 use crate::spatial::{SpatialIndex, build_index};
@@ -23,8 +25,9 @@ pub fn fit_field(
     progress: &dyn Progress,
     timings: &mut Timings,
 ) -> Result<FittedField, ReconError> {
-    let (clean, clean_stats, normalization, points) =
+    let (mut clean, clean_stats, normalization, points) =
         clean_and_normalize(cloud, params, progress, timings)?;
+    let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
 
     progress.stage("index");
     let t = Instant::now();
@@ -128,7 +131,25 @@ pub fn fit_field(
         matrix,
         residual,
         normals_flipped,
+        normals_estimated,
     })
+}
+
+/// Estimate oriented normals (PCA + MST propagation) when the input has none and the carrier is
+/// `auto` or `local`, so the local carrier can be used. Returns whether it did.
+fn estimate_missing_normals(
+    clean: &mut PointCloud,
+    points: &[Point3],
+    params: &ReconParams,
+    progress: &dyn Progress,
+) -> bool {
+    let wants_local = matches!(params.carrier.kind, CarrierKind::Auto | CarrierKind::Local);
+    if clean.normals.is_some() || !wants_local {
+        return false;
+    }
+    progress.stage("normals");
+    clean.normals = Some(estimate_oriented_normals(points, &NormalParams::default()));
+    true
 }
 
 /// Refuse before assembly when the matrix alone (values + indices, twice during assembly) would not fit.

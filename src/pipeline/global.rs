@@ -69,5 +69,6 @@ pub(super) fn fit_global(
         matrix,
         residual,
         normals_flipped: false,
+        normals_estimated: false,
     })
 }

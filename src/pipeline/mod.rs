@@ -53,6 +53,8 @@ pub struct FittedField {
     pub residual: ResidualReport,
     /// Whether the input normals were flipped (they pointed inwards).
     pub normals_flipped: bool,
+    /// Whether normals were estimated (the input had none).
+    pub normals_estimated: bool,
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
@@ -147,6 +149,13 @@ fn params_report(params: &ReconParams, fit: &FittedField, resolution: usize) -> 
         resolution,
         index: params.index.to_string(),
         normals_flipped: fit.normals_flipped,
+        normals: if fit.normals_estimated {
+            "estimated"
+        } else if fit.clean.has_normals {
+            "input"
+        } else {
+            "none"
+        },
     }
 }
 
