@@ -78,6 +78,42 @@ impl std::fmt::Display for Method {
     }
 }
 
+/// What to do with surface the data does not support (farther than the support radius from every point).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Boundary {
+    /// `trim` with the local carrier (its sheets beyond the data are extrapolation), `closed` with a
+    /// sphere or ellipsoid carrier (the seed's closed solid).
+    #[default]
+    Auto,
+    /// Drop unsupported triangles: open scans stay open, with boundary loops in the report.
+    Trim,
+    /// Keep everything: the carrier closes the surface.
+    Closed,
+}
+
+impl std::str::FromStr for Boundary {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Boundary::Auto),
+            "trim" => Ok(Boundary::Trim),
+            "closed" => Ok(Boundary::Closed),
+            _ => Err(format!("unknown boundary '{s}' (use auto, trim or closed)")),
+        }
+    }
+}
+
+impl std::fmt::Display for Boundary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Boundary::Auto => "auto",
+            Boundary::Trim => "trim",
+            Boundary::Closed => "closed",
+        })
+    }
+}
+
 /// Everything that steers a reconstruction.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReconParams {
@@ -106,6 +142,13 @@ pub struct ReconParams {
     /// Memory budget for the matrix and its factor, MiB (default 8192). Bigger systems are refused
     /// before allocation, with an estimate.
     pub max_memory_mib: u64,
+    /// Smoothing λ added to the matrix diagonal (default 0 = interpolate; 1e-3–1e-1 for noisy scans):
+    /// `(A + λI) λ = r` approximates instead of interpolating.
+    pub smoothing: f64,
+    /// Statistical outlier removal before fitting (default off).
+    pub outliers: Option<crate::geometry::outliers::OutlierParams>,
+    /// Unsupported surface: trim or keep (default `auto`).
+    pub boundary: Boundary,
 }
 
 impl Default for ReconParams {
@@ -123,6 +166,9 @@ impl Default for ReconParams {
             resolution: None,
             clean: CleanParams::default(),
             max_memory_mib: 8192,
+            smoothing: 0.0,
+            outliers: None,
+            boundary: Boundary::Auto,
         }
     }
 }
@@ -180,6 +226,22 @@ impl ReconParams {
                 "merge-tolerance",
                 tol.to_string(),
                 "a fraction of the bbox diagonal in [0, 0.01]",
+            );
+        }
+        if !(self.smoothing.is_finite() && (0.0..=10.0).contains(&self.smoothing)) {
+            return err(
+                "smoothing",
+                self.smoothing.to_string(),
+                "a number in [0, 10]",
+            );
+        }
+        if let Some(o) = self.outliers
+            && !(o.std_ratio.is_finite() && o.std_ratio > 0.0 && (2..=200).contains(&o.neighbours))
+        {
+            return err(
+                "outlier-std-ratio",
+                o.std_ratio.to_string(),
+                "a positive number (e.g. 2.5)",
             );
         }
         if !(16..=1 << 22).contains(&self.max_memory_mib) {
@@ -252,6 +314,18 @@ pub struct ReconOptions {
     #[arg(long)]
     #[serde(default)]
     pub max_memory_mib: Option<u64>,
+    /// Smoothing λ on the matrix diagonal: 0 (default) interpolates; 1e-3..1e-1 for noisy scans.
+    #[arg(long)]
+    #[serde(default)]
+    pub smoothing: Option<f64>,
+    /// Remove statistical outliers: points whose mean distance to 16 neighbours exceeds the mean by this many standard deviations (e.g. 3; default off).
+    #[arg(long)]
+    #[serde(default)]
+    pub outlier_std_ratio: Option<f64>,
+    /// Unsupported surface: auto (default: trim with the local carrier, closed otherwise), trim, closed.
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    pub boundary: Option<Boundary>,
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -278,6 +352,14 @@ impl TryFrom<&ReconOptions> for ReconParams {
                 merge_tolerance: a.merge_tolerance.unwrap_or(d.clean.merge_tolerance),
             },
             max_memory_mib: a.max_memory_mib.unwrap_or(d.max_memory_mib),
+            smoothing: a.smoothing.unwrap_or(d.smoothing),
+            outliers: a.outlier_std_ratio.map(|std_ratio| {
+                crate::geometry::outliers::OutlierParams {
+                    std_ratio,
+                    ..Default::default()
+                }
+            }),
+            boundary: a.boundary.unwrap_or(d.boundary),
         };
         p.validate()?;
         Ok(p)

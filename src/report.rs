@@ -52,6 +52,10 @@ pub struct ParamsReport {
     pub index: String,
     /// Whether input normals were flipped because they pointed inwards.
     pub normals_flipped: bool,
+    /// Smoothing λ on the diagonal (0 = interpolation).
+    pub smoothing: f64,
+    /// Unsupported surface handling actually applied: `trim` or `closed`.
+    pub boundary: &'static str,
     /// Where the normals came from: `input`, `estimated` (PCA + MST orientation) or `none`.
     pub normals: &'static str,
 }
@@ -131,6 +135,8 @@ pub struct PolygonizeReport {
     pub blocks_active: usize,
     /// Field evaluations.
     pub field_evaluations: u64,
+    /// Triangles dropped because no data point is within the support radius (open scans).
+    pub trimmed_triangles: usize,
     /// Grid cell edge, normalised units.
     pub cell_size: f64,
 }

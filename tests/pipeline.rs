@@ -269,3 +269,82 @@ fn estimated_normals_agree_with_the_bunny_scan_normals() {
         "{flips} of 10000 estimated normals point the wrong way"
     );
 }
+
+#[test]
+fn a_single_range_image_gives_an_open_surface_on_the_data() {
+    // One side of a sphere (a "range image": z above the centre), with normals.
+    let shape = Shape::by_name("sphere").unwrap();
+    let full = shape.sample(8000, 4);
+    let keep: Vec<usize> = (0..full.points.len())
+        .filter(|&i| full.points[i][2] > 0.55)
+        .collect();
+    let cloud = PointCloud {
+        points: keep.iter().map(|&i| full.points[i]).collect(),
+        normals: Some(
+            keep.iter()
+                .map(|&i| full.normals.as_ref().unwrap()[i])
+                .collect(),
+        ),
+    };
+    let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    let m = &rec.report.mesh;
+    assert_eq!(rec.report.params.boundary, "trim");
+    assert!(
+        !m.watertight && m.components == 1 && m.boundary_loops == 1,
+        "{m:?}"
+    );
+    let err = common::max_vertex_error(&rec.mesh, |p| shape.signed_distance(p));
+    assert!(err < 0.01, "open surface leaves the sphere by {err}");
+    // Asking for a closed surface keeps the carrier's continuation.
+    let closed = ReconParams {
+        boundary: rbfsurf::params::Boundary::Closed,
+        ..Default::default()
+    };
+    let rec = reconstruct(&cloud, &closed, &NoProgress).unwrap();
+    assert_eq!(rec.report.params.boundary, "closed");
+    assert_eq!(rec.report.polygonize.trimmed_triangles, 0);
+}
+
+#[test]
+fn smoothing_and_outlier_removal_handle_a_noisy_scan() {
+    use rbfsurf::geometry::synthetic::SplitMix64;
+    let shape = Shape::by_name("sphere").unwrap();
+    let mut cloud = shape.sample(6000, 8);
+    let mut rng = SplitMix64(3);
+    for p in cloud.points.iter_mut() {
+        for v in p.iter_mut() {
+            *v += 0.004 * (rng.next_f64() - 0.5);
+        }
+    }
+    // 120 gross outliers: uniform in the cube but at least 0.05 (12% of the radius) off the surface.
+    let mut added = 0;
+    while added < 120 {
+        let q = [rng.next_f64(), rng.next_f64(), rng.next_f64()];
+        if shape.signed_distance(&q).abs() > 0.05 {
+            cloud.points.push(q);
+            cloud.normals.as_mut().unwrap().push([0.0, 0.0, 1.0]);
+            added += 1;
+        }
+    }
+    let p = ReconParams {
+        smoothing: 0.05,
+        outliers: Some(Default::default()),
+        ..Default::default()
+    };
+    let rec = reconstruct(&cloud, &p, &NoProgress).unwrap();
+    let removed = rec.report.input.outliers_removed;
+    assert!((120..=200).contains(&removed), "{:?}", rec.report.input);
+    check_closed_noisy(&rec);
+    let err = common::max_vertex_error(&rec.mesh, |q| shape.signed_distance(q));
+    assert!(err < 0.01, "smoothed surface leaves the sphere by {err}");
+    // Smoothing approximates: the field no longer vanishes exactly at the data.
+    assert!(rec.report.residual.max > 1e-6);
+}
+
+fn check_closed_noisy(rec: &rbfsurf::Reconstruction) {
+    let m = &rec.report.mesh;
+    assert!(
+        m.watertight && m.components == 1 && m.genus == Some(0),
+        "{m:?}"
+    );
+}

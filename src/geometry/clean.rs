@@ -39,6 +39,8 @@ pub struct CleanStats {
     pub has_normals: bool,
     /// Points whose normal was zero or non-finite (kept as positions; their normal is ignored).
     pub invalid_normals: usize,
+    /// Points removed by the statistical outlier filter.
+    pub outliers_removed: usize,
 }
 
 /// Why a cloud cannot be reconstructed.
@@ -143,6 +145,7 @@ pub fn clean_cloud(
         } else {
             0
         },
+        outliers_removed: 0,
     };
     check_degenerate(&points, normals.is_some())?;
     Ok((PointCloud { points, normals }, stats))

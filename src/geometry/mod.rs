@@ -7,6 +7,7 @@
 mod aabb;
 pub mod clean;
 mod normalize;
+pub mod outliers;
 pub mod pca;
 pub mod synthetic;
 

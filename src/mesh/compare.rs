@@ -186,15 +186,12 @@ fn sample_by_area(
         .collect())
 }
 
-/// Mean and maximum of the distances from `samples` to the surface measured by `dist`.
+/// Mean and maximum of the distances from `samples` to the surface measured by `dist`. Distances are
+/// computed in parallel but summed in sample order, so the result does not depend on the thread schedule.
 fn mean_max(samples: &[Point3], dist: impl Fn(Point3) -> f64 + Sync) -> (f64, f64) {
-    let (sum, max) = samples
-        .par_iter()
-        .map(|&p| {
-            let d = dist(p);
-            (d, d)
-        })
-        .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1.max(y.1)));
+    let d: Vec<f64> = samples.par_iter().map(|&p| dist(p)).collect();
+    let sum: f64 = d.iter().sum();
+    let max = d.iter().fold(0.0f64, |m, &v| m.max(v));
     (sum / samples.len().max(1) as f64, max)
 }
 

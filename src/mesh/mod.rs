@@ -11,6 +11,7 @@ pub mod optimize;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 pub mod topology;
+pub mod trim;
 
 pub use compare::{CompareError, CompareParams, CompareReport, Reference, compare};
 pub use optimize::{OptimizeError, OptimizeStats, optimize_for_gpu};

@@ -54,14 +54,16 @@ pub fn orient_normals(
     }
     let mut visited = vec![false; n];
     let mut heap = BinaryHeap::new();
-    loop {
-        // Root of the next component: the unvisited point farthest along (1,1,1).
-        let Some(root) = (0..n).filter(|&i| !visited[i]).max_by(|&a, &b| {
-            let s = |p: &Point3| p[0] + p[1] + p[2];
-            s(&points[a]).total_cmp(&s(&points[b]))
-        }) else {
-            break;
-        };
+    // Roots: unvisited points in decreasing x + y + z, the first of each component.
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| {
+        let s = |p: &Point3| p[0] + p[1] + p[2];
+        s(&points[b]).total_cmp(&s(&points[a]))
+    });
+    for root in order {
+        if visited[root] {
+            continue;
+        }
         if normals[root][0] + normals[root][1] + normals[root][2] < 0.0 {
             normals[root] = normals[root].map(|v| -v);
         }

@@ -57,6 +57,7 @@ pub fn fit_field(
         index.as_ref(),
         params.kernel,
         support.radius,
+        params.smoothing,
         progress,
     )?;
     timings.assemble = t.elapsed().as_secs_f64();

@@ -10,13 +10,15 @@ use crate::spatial::SpatialIndex;
 use rayon::prelude::*;
 use sprs::CsMat;
 
-/// Assemble `A` for `points` (normalised units) with support radius `support`.
+/// Assemble `A + smoothing · I` for `points` (normalised units) with support radius `support`.
 /// Entries with `|P_i − P_j| ≥ R` are exactly zero and not stored, so the pattern is symmetric.
+/// `smoothing = 0` interpolates; `> 0` gives the smoothing spline (approximation of noisy data).
 pub fn assemble_matrix(
     points: &[Point3],
     index: &dyn SpatialIndex,
     kernel: Kernel,
     support: f64,
+    smoothing: f64,
     progress: &dyn Progress,
 ) -> Result<CsMat<f64>, RbfError> {
     let n = points.len();
@@ -38,7 +40,8 @@ pub fn assemble_matrix(
                         .iter()
                         .filter_map(|&j| {
                             let d2 = dist2(points[i], points[j as usize]);
-                            (d2 < r2).then(|| (j as usize, kernel.value(d2.sqrt() * inv_r)))
+                            let shift = if j as usize == i { smoothing } else { 0.0 };
+                            (d2 < r2).then(|| (j as usize, kernel.value(d2.sqrt() * inv_r) + shift))
                         })
                         .collect();
                     col.sort_unstable_by_key(|e| e.0);

@@ -1,0 +1,113 @@
+//! Statistical outlier removal: a point whose mean distance to its k nearest neighbours exceeds the
+//! median of that statistic over the cloud by more than `std_ratio` robust standard deviations
+//! (1.4826 · median absolute deviation) is dropped — the PCL / Open3D filter with robust statistics,
+//! so a few gross outliers cannot mask each other. `O(n k log n)`, parallel, deterministic.
+
+use super::{Point3, PointCloud};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use std::num::NonZero;
+
+/// Parameters of the statistical filter.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct OutlierParams {
+    /// Neighbours for the mean distance (default 16).
+    pub neighbours: usize,
+    /// Points beyond `median + std_ratio · 1.4826 · MAD` are outliers (default 3; smaller removes more).
+    pub std_ratio: f64,
+}
+
+impl Default for OutlierParams {
+    fn default() -> Self {
+        OutlierParams {
+            neighbours: 16,
+            std_ratio: 3.0,
+        }
+    }
+}
+
+/// The cloud without its statistical outliers, and how many were removed.
+pub fn remove_outliers(cloud: &PointCloud, params: &OutlierParams) -> (PointCloud, usize) {
+    let n = cloud.points.len();
+    let k = params.neighbours.min(n.saturating_sub(1));
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&cloud.points) else {
+        return (cloud.clone(), 0);
+    };
+    let Some(want) = NonZero::new(k + 1) else {
+        return (cloud.clone(), 0);
+    };
+    let mean_dist: Vec<f64> = cloud
+        .points
+        .par_iter()
+        .map(|p: &Point3| {
+            let nn = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(want)
+                .execute();
+            nn.iter().skip(1).map(|it| it.distance.sqrt()).sum::<f64>() / k.max(1) as f64
+        })
+        .collect();
+    // Robust centre and spread (median, 1.4826 · MAD = σ for a normal distribution): gross outliers
+    // would inflate a plain mean/std and hide each other.
+    let median = median_of(mean_dist.clone());
+    let mad = median_of(mean_dist.iter().map(|d| (d - median).abs()).collect());
+    let limit = median + params.std_ratio * 1.4826 * mad.max(1e-12 * median);
+    let keep: Vec<usize> = (0..n).filter(|&i| mean_dist[i] <= limit).collect();
+    let out = PointCloud {
+        points: keep.iter().map(|&i| cloud.points[i]).collect(),
+        normals: cloud
+            .normals
+            .as_ref()
+            .map(|nr| keep.iter().map(|&i| nr[i]).collect()),
+    };
+    (out, n - keep.len())
+}
+
+fn median_of(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::synthetic::{Shape, SplitMix64};
+
+    #[test]
+    fn scattered_outliers_are_removed_and_surface_points_kept() {
+        let mut cloud = Shape::by_name("sphere").unwrap().sample(5000, 3);
+        let mut rng = SplitMix64(5);
+        let normals = cloud.normals.as_mut().unwrap();
+        let sphere = Shape::by_name("sphere").unwrap();
+        let mut added = 0;
+        while added < 250 {
+            let q = [rng.next_f64(), rng.next_f64(), rng.next_f64()];
+            if sphere.signed_distance(&q).abs() > 0.05 {
+                cloud.points.push(q);
+                normals.push([0.0, 0.0, 1.0]);
+                added += 1;
+            }
+        }
+        let (clean, removed) = remove_outliers(&cloud, &OutlierParams::default());
+        let surviving_outliers = clean
+            .points
+            .iter()
+            .filter(|p| sphere.signed_distance(p).abs() > 1e-9)
+            .count();
+        let lost_surface = 5000
+            - clean
+                .points
+                .iter()
+                .filter(|p| sphere.signed_distance(p).abs() <= 1e-9)
+                .count();
+        assert!(
+            surviving_outliers == 0,
+            "{surviving_outliers} of 250 outliers survive (removed {removed})"
+        );
+        assert!(lost_surface < 50, "{lost_surface} surface points removed");
+        assert_eq!(clean.normals.unwrap().len(), clean.points.len());
+    }
+}
