@@ -129,7 +129,7 @@ pub struct ReconParams {
     pub index: IndexKind,
     /// Octree leaf size K (seed Algorithm I), default 16.
     pub leaf_size: usize,
-    /// Matrix ordering (default `rcm`; used by the envelope solver and reported for all).
+    /// Matrix ordering (default `bfs`, the seed's Algorithm III: as tight as RCM here and ~7× faster; used by the envelope solver and reported for all).
     pub ordering: OrderingKind,
     /// Linear solver (default `sparse`: faer supernodal Cholesky with AMD).
     pub solver: SolverKind,
@@ -160,7 +160,7 @@ impl Default for ReconParams {
             carrier: CarrierParams::default(),
             index: IndexKind::default(),
             leaf_size: 16,
-            ordering: OrderingKind::Rcm,
+            ordering: OrderingKind::Bfs,
             solver: SolverKind::Sparse,
             polynomial: Polynomial::None,
             resolution: None,
@@ -282,7 +282,7 @@ pub struct ReconOptions {
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
     pub carrier: Option<crate::rbf::CarrierKind>,
-    /// Matrix ordering: none, bfs (seed Algorithm III), rcm (default).
+    /// Matrix ordering: none, bfs (default, seed Algorithm III), rcm.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
     pub ordering: Option<OrderingKind>,

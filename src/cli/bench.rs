@@ -242,7 +242,7 @@ fn scaling(a: &BenchArgs) -> Result<()> {
         solver_rows.push(solver_comparison(&cloud, n, &r)?);
     }
     println!(
-        "\nEnvelope (own Jennings profile Cholesky, RCM) vs sparse (faer supernodal, AMD), same matrix\n"
+        "\nEnvelope (own Jennings profile Cholesky, BFS ordering) vs sparse (faer supernodal, AMD), same matrix\n"
     );
     println!(
         "| N | envelope values | sparse factor values | ratio | envelope factor+solve s | sparse factor+solve s | ratio |"
