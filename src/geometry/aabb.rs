@@ -81,6 +81,19 @@ impl Aabb {
         }
     }
 
+    /// The 8 corners (bit 0 of the index selects max x, bit 1 max y, bit 2 max z).
+    pub fn corners(&self) -> [Point3; 8] {
+        std::array::from_fn(|c| {
+            std::array::from_fn(|k| {
+                if c >> k & 1 == 0 {
+                    self.min[k]
+                } else {
+                    self.max[k]
+                }
+            })
+        })
+    }
+
     /// Squared distance from `p` to the box (0 inside).
     pub fn dist2_to(&self, p: &Point3) -> f64 {
         (0..3)

@@ -181,27 +181,10 @@ fn fit_oriented_carrier(
     let mut flipped = false;
     if let Carrier::Local(local) = &mut carrier {
         let outer = Aabb::from_points(points).inflated(0.25);
-        let negatives = (0..8)
-            .filter(|c| {
-                let p = [
-                    if c & 1 == 0 {
-                        outer.min[0]
-                    } else {
-                        outer.max[0]
-                    },
-                    if c & 2 == 0 {
-                        outer.min[1]
-                    } else {
-                        outer.max[1]
-                    },
-                    if c & 4 == 0 {
-                        outer.min[2]
-                    } else {
-                        outer.max[2]
-                    },
-                ];
-                local.value_gradient(&p).0 < 0.0
-            })
+        let negatives = outer
+            .corners()
+            .iter()
+            .filter(|p| local.value_gradient(p).0 < 0.0)
             .count();
         if negatives > 4 {
             local.flip_normals();

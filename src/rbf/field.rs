@@ -118,26 +118,7 @@ impl ScalarField for RbfField {
             return far(&c).abs() <= (l + self.poly_gradient_norm()) * half;
         }
         let mut samples = vec![far(&c)];
-        for corner in 0..8 {
-            let p = [
-                if corner & 1 == 0 {
-                    cell.min[0]
-                } else {
-                    cell.max[0]
-                },
-                if corner & 2 == 0 {
-                    cell.min[1]
-                } else {
-                    cell.max[1]
-                },
-                if corner & 4 == 0 {
-                    cell.min[2]
-                } else {
-                    cell.max[2]
-                },
-            ];
-            samples.push(far(&p));
-        }
+        samples.extend(cell.corners().iter().map(far));
         let pos = samples.iter().filter(|v| **v > 0.0).count();
         pos != 0 && pos != samples.len() || samples.iter().any(|v| v.abs() <= 0.5 * half)
     }
