@@ -5,7 +5,7 @@ use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverParams, factorize, solve_bordered};
 use crate::normals::{NormalParams, estimate_oriented_normals};
-use crate::ordering::{compute_ordering, matrix_shape};
+use crate::ordering::{MatrixShape, Permutation, compute_ordering, matrix_shape};
 use crate::params::{Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
@@ -15,6 +15,7 @@ use crate::rbf::{
 use crate::report::{MatrixReport, Timings};
 use crate::spatial::{SpatialIndex, build_index};
 use rayon::prelude::*;
+use sprs::CsMat;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -50,60 +51,24 @@ pub fn fit_field(
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
-    progress.stage("assemble");
-    let t = Instant::now();
-    let a = assemble_matrix(
+    let (a, perm, shape) = assemble_and_order(
         &points,
         index.as_ref(),
-        params.kernel,
         support.radius,
-        params.smoothing,
+        params,
         progress,
+        timings,
     )?;
-    timings.assemble = t.elapsed().as_secs_f64();
-
-    progress.stage("order");
-    let t = Instant::now();
-    let perm = compute_ordering(params.ordering, &points, support.radius, &a, None)?;
-    let shape = matrix_shape(&a, &perm)?;
-    timings.order = t.elapsed().as_secs_f64();
-    check_cancel(progress)?;
-
-    progress.stage("factor");
-    let t = Instant::now();
-    let budget_values =
-        (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
-    let solver = SolverParams {
-        kind: params.solver,
-        max_factor_values: budget_values,
-    };
-    let (factor, fstats) = factorize(&a, Some(&perm.perm), &solver, progress)?;
-    timings.factor = t.elapsed().as_secs_f64();
-
-    progress.stage("solve");
-    let t = Instant::now();
-    let (weights, polynomial) = match params.polynomial {
-        Polynomial::None => {
-            let mut x = rhs.clone();
-            factor.solve_in_place(&mut x);
-            (x, None)
-        }
-        Polynomial::Linear => {
-            let poly: Vec<[f64; 4]> = points.iter().map(|p| [1.0, p[0], p[1], p[2]]).collect();
-            let (x, v) = solve_bordered(factor.as_ref(), &poly, &rhs)?;
-            (x, Some(v))
-        }
-    };
-    timings.solve = t.elapsed().as_secs_f64();
+    let (weights, polynomial, factor_values) =
+        solve_weights(&a, &perm.perm, &rhs, &points, params, progress, timings)?;
     let matrix = MatrixReport {
         n: shape.n,
         nnz: shape.nnz,
         bandwidth: shape.bandwidth,
         profile_values: shape.profile_values,
         dense_values: shape.dense_values,
-        factor_values: fstats.factor_values,
+        factor_values,
     };
-    drop(factor);
     drop(a);
     let carrier_name = carrier.name();
     let carrier_bounds = carrier.zero_set_bounds();
@@ -134,6 +99,77 @@ pub fn fit_field(
         normals_flipped,
         normals_estimated,
     })
+}
+
+/// Assemble `A (+ λI)` and compute the ordering and the matrix shape under it (stages `assemble`, `order`).
+fn assemble_and_order(
+    points: &[Point3],
+    index: &dyn SpatialIndex,
+    radius: f64,
+    params: &ReconParams,
+    progress: &dyn Progress,
+    timings: &mut Timings,
+) -> Result<(CsMat<f64>, Permutation, MatrixShape), ReconError> {
+    progress.stage("assemble");
+    let t = Instant::now();
+    let a = assemble_matrix(
+        points,
+        index,
+        params.kernel,
+        radius,
+        params.smoothing,
+        progress,
+    )?;
+    timings.assemble = t.elapsed().as_secs_f64();
+    progress.stage("order");
+    let t = Instant::now();
+    let perm = compute_ordering(params.ordering, points, radius, &a, None)?;
+    let shape = matrix_shape(&a, &perm)?;
+    timings.order = t.elapsed().as_secs_f64();
+    check_cancel(progress)?;
+    Ok((a, perm, shape))
+}
+
+/// Spline weights, the linear polynomial when fitted, and the factor's stored values.
+type Solved = (Vec<f64>, Option<[f64; 4]>, usize);
+
+/// Factorise `A` and solve for the weights (and the linear polynomial through the bordered system),
+/// within the memory budget (stages `factor`, `solve`). Returns (weights, polynomial, factor values).
+fn solve_weights(
+    a: &CsMat<f64>,
+    perm: &[usize],
+    rhs: &[f64],
+    points: &[Point3],
+    params: &ReconParams,
+    progress: &dyn Progress,
+    timings: &mut Timings,
+) -> Result<Solved, ReconError> {
+    progress.stage("factor");
+    let t = Instant::now();
+    let budget_values =
+        (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
+    let solver = SolverParams {
+        kind: params.solver,
+        max_factor_values: budget_values,
+    };
+    let (factor, fstats) = factorize(a, Some(perm), &solver, progress)?;
+    timings.factor = t.elapsed().as_secs_f64();
+    progress.stage("solve");
+    let t = Instant::now();
+    let solved = match params.polynomial {
+        Polynomial::None => {
+            let mut x = rhs.to_vec();
+            factor.solve_in_place(&mut x);
+            (x, None, fstats.factor_values)
+        }
+        Polynomial::Linear => {
+            let poly: Vec<[f64; 4]> = points.iter().map(|p| [1.0, p[0], p[1], p[2]]).collect();
+            let (x, v) = solve_bordered(factor.as_ref(), &poly, rhs)?;
+            (x, Some(v), fstats.factor_values)
+        }
+    };
+    timings.solve = t.elapsed().as_secs_f64();
+    Ok(solved)
 }
 
 /// Estimate oriented normals (PCA + MST propagation) when the input has none and the carrier is
