@@ -209,6 +209,38 @@ impl ImplicitField<2> for MlpFit {
     }
 }
 
+/// The constraints in domain units: samples plus pseudo-normal points on both sides, values
+/// scaled to `p.target_peak`; returns them and the scale applied.
+fn domain_constraints(
+    samples: &[Sample<2>],
+    frame: &Frame<2>,
+    offset: Offset,
+    p: &MlpParams,
+) -> Result<(Vec<ValueConstraint<2>>, f64), VariationalError> {
+    let norm: Vec<Sample<2>> = samples
+        .iter()
+        .map(|s| Sample {
+            p: frame.forward(&s.p),
+            ..*s
+        })
+        .collect();
+    let unit = extent(norm.iter().map(|s| s.p)).max(f64::MIN_POSITIVE);
+    let pseudo = PseudoNormalParams {
+        offset,
+        sides: Sides::Both,
+    };
+    let mut cons = expand_pseudo_normals(&norm, &pseudo, unit)?;
+    // Targets scaled to max |z| = 1 (the seed's ±1), so Adam's steps fit the output scale.
+    let zmax = cons.iter().map(|c| c.value.abs()).fold(0.0, f64::max);
+    let target_scale = if zmax > 0.0 && p.target_peak > 0.0 {
+        p.target_peak / zmax
+    } else {
+        1.0
+    };
+    cons.iter_mut().for_each(|c| c.value *= target_scale);
+    Ok((cons, target_scale))
+}
+
 /// Fit the network to `samples` over the `domain` rectangle (`(min, max)`, input units).
 ///
 /// Errors: invalid parameters or samples, a degenerate domain, `Cancelled` when `progress` asks,
@@ -235,27 +267,7 @@ pub fn fit_mlp(
         centre: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])],
         scale: (w * h).sqrt(),
     };
-    let norm: Vec<Sample<2>> = samples
-        .iter()
-        .map(|s| Sample {
-            p: frame.forward(&s.p),
-            ..*s
-        })
-        .collect();
-    let unit = extent(norm.iter().map(|s| s.p)).max(f64::MIN_POSITIVE);
-    let pseudo = PseudoNormalParams {
-        offset,
-        sides: Sides::Both,
-    };
-    let mut cons = expand_pseudo_normals(&norm, &pseudo, unit)?;
-    // Targets scaled to max |z| = 1 (the seed's ±1), so Adam's steps fit the output scale.
-    let zmax = cons.iter().map(|c| c.value.abs()).fold(0.0, f64::max);
-    let target_scale = if zmax > 0.0 && p.target_peak > 0.0 {
-        p.target_peak / zmax
-    } else {
-        1.0
-    };
-    cons.iter_mut().for_each(|c| c.value *= target_scale);
+    let (cons, target_scale) = domain_constraints(samples, &frame, offset, p)?;
     let pairs: Vec<([f64; 2], f64)> = cons.iter().map(|c| (c.p, c.value)).collect();
     let half = [0.5 * w / frame.scale, 0.5 * h / frame.scale];
     let aux = train::auxiliary_points(p.aux_points, half, p.seed);
