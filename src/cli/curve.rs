@@ -277,6 +277,32 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(dir.path().join("k.json")).unwrap())
                 .unwrap();
         assert_eq!(j["quality"]["components"], 1);
+        assert_eq!(
+            crate::cli::run([
+                "rbfsurf",
+                "curve",
+                "--dataset",
+                "five-point",
+                "--method",
+                "mlp-noreg",
+                "--epochs",
+                "200",
+                "--hidden",
+                "8",
+                "--quiet",
+                "-o",
+                dir.path().join("m.svg").to_str().unwrap(),
+                "--report",
+                dir.path().join("m.json").to_str().unwrap(),
+            ]),
+            0
+        );
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("m.json")).unwrap())
+                .unwrap();
+        assert_eq!(m["method"], "mlp-noreg");
+        assert_eq!(m["mlp"]["smoothing"], "off");
+        assert_eq!(m["training"]["weights"], 2 * 8 + 8 + 8 * 8 + 8 + 9);
         let bad = CurveArgs {
             dataset: Some("nope".into()),
             ..a

@@ -199,3 +199,34 @@ fn thin_plate_term_trades_energy_for_fit_on_sparse_data() {
         seed.quality
     );
 }
+
+/// Training reports stage "train" and a non-decreasing fraction that ends at 1.
+#[test]
+fn progress_reports_epochs() {
+    use std::sync::Mutex;
+    #[derive(Default)]
+    struct Rec(Mutex<(Vec<String>, Vec<f64>)>);
+    impl crate::progress::Progress for Rec {
+        fn stage(&self, name: &str) {
+            self.0.lock().unwrap().0.push(name.to_string());
+        }
+        fn fraction(&self, done: f64) {
+            self.0.lock().unwrap().1.push(done);
+        }
+        fn cancelled(&self) -> bool {
+            false
+        }
+    }
+    let s = datasets::co_circular(8);
+    let rec = Rec::default();
+    let p = MlpParams {
+        plateau_window: 0,
+        ..small(Smoothing::Off, 400)
+    };
+    let fit = fit_mlp(&s, box_of(&s, 0.25), Offset::SpacingFraction(0.1), &p, &rec).unwrap();
+    assert_eq!((fit.info.epochs, fit.info.stopped_on_plateau), (400, false));
+    let (stages, fr) = rec.0.into_inner().unwrap();
+    assert_eq!(stages, vec!["train".to_string()]);
+    assert!(fr.len() >= 100 && fr.windows(2).all(|w| w[0] <= w[1]));
+    assert_eq!(fr.last(), Some(&1.0));
+}
