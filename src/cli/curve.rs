@@ -4,10 +4,57 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::progress::Progress;
 
 use crate::variational::{
-    CurveMethod, CurveParams, Offset, WeightPower, curve_io, datasets, run_workbench,
+    CurveMethod, CurveParams, MlpParams, Offset, WeightPower, curve_io, datasets,
+    workbench::run_workbench_with_progress,
 };
+
+/// A progress bar over training epochs (indicatif on stderr; hidden when `quiet` or when stderr
+/// is not a terminal, which indicatif detects itself).
+struct EpochBar {
+    bar: ProgressBar,
+}
+
+impl EpochBar {
+    const TICKS: u64 = 1000;
+
+    fn new(quiet: bool) -> Self {
+        let bar = ProgressBar::with_draw_target(Some(Self::TICKS), ProgressDrawTarget::stderr());
+        if quiet {
+            bar.set_draw_target(ProgressDrawTarget::hidden());
+        }
+        if let Ok(style) =
+            ProgressStyle::with_template("{elapsed:>4} {msg:<8} [{bar:30}] {percent:>3}% eta {eta}")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        EpochBar { bar }
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl Progress for EpochBar {
+    fn stage(&self, name: &str) {
+        self.bar.set_message(name.to_string());
+        self.bar.set_position(0);
+    }
+
+    fn fraction(&self, done: f64) {
+        self.bar
+            .set_position((done.clamp(0.0, 1.0) * Self::TICKS as f64) as u64);
+    }
+
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
 
 /// Fitting method names on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -26,6 +73,74 @@ pub enum MethodArg {
     ShenConstantNormals,
     /// Shen MLS, linear, true normals.
     ShenLinearNormals,
+    /// Jiang & Turk's MLP with thin-plate energy at auxiliary points.
+    Mlp,
+    /// MLP without regulariser (λ = 0).
+    MlpNoreg,
+    /// MLP with the thin-plate energy at the constraint points only.
+    MlpConstraintCurvature,
+    /// MLP with dropout instead of the thin-plate energy.
+    MlpDropout,
+}
+
+/// Network options of the MLP methods.
+#[derive(Debug, Clone, clap::Args)]
+pub struct MlpArgs {
+    /// MLP: thin-plate weight λ.
+    #[arg(long, default_value_t = 0.05)]
+    pub lambda: f64,
+    /// MLP: auxiliary points P (uniform over the plot box).
+    #[arg(long, default_value_t = 250)]
+    pub aux_points: usize,
+    /// MLP: epoch limit (training stops earlier on a loss plateau).
+    #[arg(long, default_value_t = 3000)]
+    pub epochs: usize,
+    /// MLP: neurons per hidden layer.
+    #[arg(long, default_value_t = 32)]
+    pub hidden: usize,
+    /// MLP: hidden layers.
+    #[arg(long, default_value_t = 2)]
+    pub layers: usize,
+    /// MLP: initial Adam learning rate (decays exponentially to 5% of it).
+    #[arg(long, default_value_t = 1e-2)]
+    pub lr: f64,
+    /// MLP: first-layer initial weight scale over Xavier (sharper features for > 1).
+    #[arg(long, default_value_t = 1.0)]
+    pub input_gain: f64,
+    /// MLP: scale the constraint values to this largest magnitude (0 keeps them).
+    #[arg(long, default_value_t = 1.0)]
+    pub target_peak: f64,
+    /// MLP: plateau test window in epochs (0 = always run every epoch).
+    #[arg(long, default_value_t = 250)]
+    pub plateau_window: usize,
+    /// MLP: dropout rate of mlp-dropout.
+    #[arg(long, default_value_t = 0.1)]
+    pub dropout: f64,
+    /// MLP: seed of the weights, auxiliary points and dropout masks.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Do not draw the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl MlpArgs {
+    fn params(&self) -> MlpParams {
+        MlpParams {
+            lambda: self.lambda,
+            aux_points: self.aux_points,
+            epochs: self.epochs,
+            hidden: self.hidden,
+            layers: self.layers,
+            learning_rate: self.lr,
+            dropout: self.dropout,
+            input_gain: self.input_gain,
+            target_peak: self.target_peak,
+            plateau_window: self.plateau_window,
+            seed: self.seed,
+            ..Default::default()
+        }
+    }
 }
 
 /// Arguments of `rbfsurf curve`.
@@ -57,6 +172,9 @@ pub struct CurveArgs {
     /// Use a built-in data set instead of a file (shen27, koch0..koch4, square, ...).
     #[arg(long)]
     pub dataset: Option<String>,
+    /// MLP options.
+    #[command(flatten)]
+    pub mlp: MlpArgs,
 }
 
 /// Run the workbench and write the SVG (and report) atomically.
@@ -78,6 +196,10 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
         MethodArg::ShenLinear => CurveMethod::ShenLinear,
         MethodArg::ShenConstantNormals => CurveMethod::ShenConstantNormals,
         MethodArg::ShenLinearNormals => CurveMethod::ShenLinearNormals,
+        MethodArg::Mlp => CurveMethod::Mlp,
+        MethodArg::MlpNoreg => CurveMethod::MlpNoreg,
+        MethodArg::MlpConstraintCurvature => CurveMethod::MlpConstraintCurvature,
+        MethodArg::MlpDropout => CurveMethod::MlpDropout,
     };
     let params = CurveParams {
         method,
@@ -86,9 +208,13 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
         weight: WeightPower::Auto,
         offset: Offset::SpacingFraction(a.offset),
         margin: a.margin,
+        mlp: a.mlp.params(),
         ..Default::default()
     };
-    let out = run_workbench(&samples, &params)?;
+    let bar = EpochBar::new(a.mlp.quiet || params.method.mlp_smoothing().is_none());
+    let out = run_workbench_with_progress(&samples, &params, &bar);
+    bar.finish();
+    let out = out?;
     write_atomic(&a.output, out.svg.as_bytes())?;
     if let Some(r) = &a.report {
         write_atomic(r, serde_json::to_string_pretty(&out.report)?.as_bytes())?;
@@ -126,6 +252,20 @@ mod tests {
             margin: 0.25,
             report: Some(dir.path().join("k.json")),
             dataset: Some("koch1".into()),
+            mlp: MlpArgs {
+                lambda: 0.05,
+                aux_points: 250,
+                epochs: 3000,
+                hidden: 32,
+                layers: 2,
+                lr: 1e-2,
+                dropout: 0.1,
+                input_gain: 1.0,
+                target_peak: 1.0,
+                plateau_window: 250,
+                seed: 1,
+                quiet: true,
+            },
         };
         run(&a).unwrap();
         assert!(
@@ -137,6 +277,32 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(dir.path().join("k.json")).unwrap())
                 .unwrap();
         assert_eq!(j["quality"]["components"], 1);
+        assert_eq!(
+            crate::cli::run([
+                "rbfsurf",
+                "curve",
+                "--dataset",
+                "five-point",
+                "--method",
+                "mlp-noreg",
+                "--epochs",
+                "200",
+                "--hidden",
+                "8",
+                "--quiet",
+                "-o",
+                dir.path().join("m.svg").to_str().unwrap(),
+                "--report",
+                dir.path().join("m.json").to_str().unwrap(),
+            ]),
+            0
+        );
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("m.json")).unwrap())
+                .unwrap();
+        assert_eq!(m["method"], "mlp-noreg");
+        assert_eq!(m["mlp"]["smoothing"], "off");
+        assert_eq!(m["training"]["weights"], 2 * 8 + 8 + 8 * 8 + 8 + 9);
         let bad = CurveArgs {
             dataset: Some("nope".into()),
             ..a

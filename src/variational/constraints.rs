@@ -143,6 +143,15 @@ pub enum VariationalError {
         /// What was wrong.
         message: String,
     },
+    /// The caller cancelled the work through its progress handle.
+    #[error("cancelled")]
+    Cancelled,
+    /// Network training produced a non-finite loss or gradient.
+    #[error("training diverged at epoch {epoch} (non-finite loss); lower the learning rate or λ")]
+    TrainingDiverged {
+        /// Epoch at which the loss became non-finite.
+        epoch: usize,
+    },
     /// An unknown built-in data set name.
     #[error("unknown data set {name:?}; known: {known}")]
     UnknownDataset {

@@ -6,7 +6,7 @@
 //! - [`incremental`]: add constraints to a solved system by a Schur complement (Jiang & Turk).
 //! - [`mls`]: Shen's moving-least-squares implicit (constant/linear × pseudo/true normals).
 //! - 2D curves workbench: [`marching_squares`], [`quality`], [`svg`], [`datasets`], [`curve_io`],
-//!   [`workbench`]; 3D fields for the polygonizer in [`field3d`].
+//!   [`workbench`]; Jiang & Turk's neural approximator in [`mlp`]; 3D fields for the polygonizer in [`field3d`].
 //!
 //! Every fit works in normalised coordinates ([`Frame`]: bounding-box centre at the origin,
 //! longest edge 1) and evaluates in the caller's units. Sign convention: `f < 0` inside.
@@ -19,6 +19,7 @@ pub mod field3d;
 pub mod incremental;
 pub mod kernel;
 pub mod marching_squares;
+pub mod mlp;
 pub mod mls;
 pub mod quality;
 pub mod svg;
@@ -33,6 +34,7 @@ pub use field3d::{
 };
 pub use incremental::IncrementalSystem;
 pub use kernel::RadialKernel;
+pub use mlp::{MlpFit, MlpParams, Smoothing, fit_mlp};
 pub use mls::{MlsBasis, MlsField, MlsNormals, MlsParams, WeightPower, fit_mls};
 pub use turk_obrien::{NormalMode, TurkObrienFit, TurkObrienParams, fit_turk_obrien};
 pub use workbench::{CurveMethod, CurveParams, CurveReport, WorkbenchOutput, run_workbench};

@@ -5,6 +5,8 @@
 
 use std::time::Instant;
 
+use crate::progress::{NoProgress, Progress};
+
 use super::Frame;
 use super::ImplicitField;
 use super::constraints::{
@@ -13,6 +15,7 @@ use super::constraints::{
 use super::marching_squares::{
     Grid2, MarchingParams, Polyline, contour_values, sample_grid_blocked,
 };
+use super::mlp::{MlpParams, Smoothing, TrainingInfo, fit_mlp, pseudo_points};
 use super::mls::{MlsBasis, MlsNormals, MlsParams, WeightPower, fit_mls};
 use super::quality::{CurveQuality, analyse, curvatures};
 use super::svg::{SvgInput, render};
@@ -36,6 +39,27 @@ pub enum CurveMethod {
     ShenConstantNormals,
     /// Shen MLS, linear basis, true normals.
     ShenLinearNormals,
+    /// Jiang & Turk's MLP with thin-plate energy at auxiliary points ([`super::mlp`]).
+    Mlp,
+    /// MLP baseline (a): no regulariser (λ = 0).
+    MlpNoreg,
+    /// MLP baseline (b): thin-plate energy at the constraint points only.
+    MlpConstraintCurvature,
+    /// MLP baseline (c): dropout instead of the thin-plate energy.
+    MlpDropout,
+}
+
+impl CurveMethod {
+    /// The MLP regulariser of an MLP method, `None` for the other methods.
+    pub fn mlp_smoothing(self) -> Option<Smoothing> {
+        match self {
+            CurveMethod::Mlp => Some(Smoothing::AuxiliaryPoints),
+            CurveMethod::MlpNoreg => Some(Smoothing::Off),
+            CurveMethod::MlpConstraintCurvature => Some(Smoothing::ConstraintPoints),
+            CurveMethod::MlpDropout => Some(Smoothing::Dropout),
+            _ => None,
+        }
+    }
 }
 
 /// Workbench parameters.
@@ -60,6 +84,8 @@ pub struct CurveParams {
     /// Distance (input units) within which a data point counts as on the curve; `None` = one cell
     /// diagonal.
     pub tolerance: Option<f64>,
+    /// Network and training parameters of the MLP methods (the method sets the smoothing).
+    pub mlp: MlpParams,
 }
 
 impl Default for CurveParams {
@@ -74,6 +100,7 @@ impl Default for CurveParams {
             bounds: None,
             kappa_scale: 5.0,
             tolerance: None,
+            mlp: MlpParams::default(),
         }
     }
 }
@@ -98,6 +125,10 @@ pub struct CurveReport {
     pub samples: usize,
     /// Dense solve diagnostics (Turk–O'Brien only).
     pub solve: Option<FitInfo>,
+    /// Network parameters (MLP methods only).
+    pub mlp: Option<MlpParams>,
+    /// Training summary (MLP methods only).
+    pub training: Option<TrainingInfo>,
     /// Sampling grid.
     pub grid: Grid2,
     /// Quality of the zero set.
@@ -125,10 +156,39 @@ pub struct FittedCurve {
     pub extra: Vec<ValueConstraint<2>>,
     /// Dense solve diagnostics.
     pub solve: Option<FitInfo>,
+    /// Training summary (MLP methods).
+    pub training: Option<TrainingInfo>,
 }
 
 /// Fit the chosen method.
 pub fn fit_curve(samples: &[Sample<2>], p: &CurveParams) -> Result<FittedCurve, VariationalError> {
+    fit_curve_with_progress(samples, p, &NoProgress)
+}
+
+/// Fit an MLP method over the workbench's sampling box.
+fn fit_mlp_curve(
+    samples: &[Sample<2>],
+    p: &CurveParams,
+    smoothing: Smoothing,
+    progress: &dyn Progress,
+) -> Result<FittedCurve, VariationalError> {
+    let grid = grid_for(samples, p)?;
+    let mp = MlpParams { smoothing, ..p.mlp };
+    let fit = fit_mlp(samples, (grid.min, grid.max), p.offset, &mp, progress)?;
+    Ok(FittedCurve {
+        extra: pseudo_points(&fit),
+        solve: None,
+        training: Some(fit.info),
+        field: Box::new(fit),
+    })
+}
+
+/// [`fit_curve`] reporting to `progress` (MLP training epochs; the other fits are not staged).
+pub fn fit_curve_with_progress(
+    samples: &[Sample<2>],
+    p: &CurveParams,
+    progress: &dyn Progress,
+) -> Result<FittedCurve, VariationalError> {
     use CurveMethod as M;
     let pseudo = |sides| PseudoNormalParams {
         offset: p.offset,
@@ -152,12 +212,20 @@ pub fn fit_curve(samples: &[Sample<2>], p: &CurveParams) -> Result<FittedCurve, 
                 field: Box::new(fit),
                 extra,
                 solve,
+                training: None,
             });
         }
         M::ShenConstant => (MlsNormals::Pseudo(pseudo(Sides::Both)), MlsBasis::Constant),
         M::ShenLinear => (MlsNormals::Pseudo(pseudo(Sides::Both)), MlsBasis::Linear),
         M::ShenConstantNormals => (MlsNormals::True, MlsBasis::Constant),
         M::ShenLinearNormals => (MlsNormals::True, MlsBasis::Linear),
+        M::Mlp | M::MlpNoreg | M::MlpConstraintCurvature | M::MlpDropout => {
+            let sm = p
+                .method
+                .mlp_smoothing()
+                .unwrap_or(Smoothing::AuxiliaryPoints);
+            return fit_mlp_curve(samples, p, sm, progress);
+        }
     };
     let f = fit_mls(
         samples,
@@ -187,6 +255,7 @@ pub fn fit_curve(samples: &[Sample<2>], p: &CurveParams) -> Result<FittedCurve, 
         field: Box::new(f),
         extra,
         solve: None,
+        training: None,
     })
 }
 
@@ -250,8 +319,19 @@ pub fn run_workbench(
     samples: &[Sample<2>],
     p: &CurveParams,
 ) -> Result<WorkbenchOutput, VariationalError> {
+    run_workbench_with_progress(samples, p, &NoProgress)
+}
+
+/// [`run_workbench`] reporting to `progress` (stage `"train"` with a fraction per epoch for the
+/// MLP methods, then `"contour"`); `Cancelled` when it asks to stop.
+pub fn run_workbench_with_progress(
+    samples: &[Sample<2>],
+    p: &CurveParams,
+    progress: &dyn Progress,
+) -> Result<WorkbenchOutput, VariationalError> {
     let t0 = Instant::now();
-    let fitted = fit_curve(samples, p)?;
+    let fitted = fit_curve_with_progress(samples, p, progress)?;
+    progress.stage("contour");
     let t1 = Instant::now();
     let grid = grid_for(samples, p)?;
     let field = |x: &[f64; 2]| fitted.field.value(x);
@@ -283,6 +363,11 @@ pub fn run_workbench(
         method: p.method,
         samples: samples.len(),
         solve: fitted.solve,
+        mlp: p
+            .method
+            .mlp_smoothing()
+            .map(|smoothing| MlpParams { smoothing, ..p.mlp }),
+        training: fitted.training,
         grid,
         quality,
         timings_s,
