@@ -464,7 +464,10 @@ impl JobManager {
         let read_s = t.elapsed().as_secs_f64();
         let mut rec = match crate::reconstruct(&cloud, &params, progress) {
             Ok(r) => r,
+            // Stages report a stop through their own error types (e.g. a linalg `Cancelled`
+            // wrapped in `ReconError::Linalg`): when a stop was requested, that is the cause.
             Err(crate::ReconError::Cancelled) => return Err(JobError::Stopped),
+            Err(_) if progress.cancelled() => return Err(JobError::Stopped),
             Err(e) if e.is_input_problem() => {
                 return Err(JobError::Failed(ErrorBody {
                     code: "unreconstructable".into(),
