@@ -196,7 +196,7 @@ function createViewer(canvas) {
   const loc = { pos: gl.getAttribLocation(prog, "aPos"), nrm: gl.getAttribLocation(prog, "aNrm"),
     mvp: gl.getUniformLocation(prog, "uMvp"), view: gl.getUniformLocation(prog, "uView"),
     color: gl.getUniformLocation(prog, "uColor") };
-  const state = { yaw: 0.6, pitch: 0.35, dist: 2.6, count: 0, center: [0, 0, 0], scale: 1 };
+  const state = { yaw: 0.6, pitch: 0.35, dist: 3.4, count: 0, center: [0, 0, 0], scale: 1 };
   let buffers = null;
 
   function setMesh(m) {
@@ -212,7 +212,7 @@ function createViewer(canvas) {
     resetView();
   }
 
-  function resetView() { state.yaw = 0.6; state.pitch = 0.35; state.dist = 2.6; draw(); }
+  function resetView() { state.yaw = 0.6; state.pitch = 0.35; state.dist = 3.4; draw(); }
 
   function draw() {
     const w = canvas.clientWidth * devicePixelRatio | 0, h = canvas.clientHeight * devicePixelRatio | 0;
