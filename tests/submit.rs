@@ -37,7 +37,6 @@ async fn submit_exits_zero_only_on_success() {
         report.display().to_string(),
     );
     let ok = tokio::task::spawn_blocking({
-        let run = run.clone();
         let a = s(&[
             &c,
             "--server",
@@ -80,7 +79,6 @@ async fn submit_exits_zero_only_on_success() {
             "cannot connect",
         ),
     ] {
-        let run = run.clone();
         let res = tokio::task::spawn_blocking(move || run(args))
             .await
             .unwrap();
