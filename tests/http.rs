@@ -505,44 +505,54 @@ async fn full_queue_is_429_and_shutdown_is_503() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn wait_on_an_unreconstructable_job_is_422_with_the_job() {
-    // Coplanar points with normals pass the upload check; the carrier cannot be fitted → 422.
+async fn wait_on_a_job_that_cannot_fit_its_budget_is_422_with_the_job() {
+    // Support 2 (the whole cloud) on 3000 points: ~9e6 matrix values, over a 16 MiB budget.
+    // The upload check passes; the pipeline refuses before allocating.
     let s = start(|_| {});
-    let mut t = String::new();
-    for i in 0..12 {
-        for j in 0..12 {
-            t.push_str(&format!("{} {} 0 0 0 1\n", i as f64 * 0.1, j as f64 * 0.1));
-        }
-    }
     let a = post(
         &s.app,
-        "/v1/reconstructions?carrier=sphere&resolution=24&wait=60",
+        "/v1/reconstructions?support=2&max-memory-mib=16&wait=60",
         "text/plain",
-        t,
+        sphere_xyz(3000, 17),
     )
     .await;
-    if a.status == StatusCode::OK {
-        // The pipeline may handle a flat patch; then the answer must be a real mesh.
-        assert_eq!(a.json()["status"], "succeeded");
-    } else {
-        let code = a.expect_error(a.status);
-        assert!(matches!(a.status.as_u16(), 422 | 500), "{}", a.status);
-        assert!(a.json()["job"]["id"].is_string(), "{code}");
-    }
+    assert_eq!(
+        a.expect_error(StatusCode::UNPROCESSABLE_ENTITY),
+        "system_too_large"
+    );
+    let v = a.json();
+    assert!(
+        v["error"]["message"].as_str().unwrap().contains("budget"),
+        "{v}"
+    );
+    assert_eq!(v["job"]["status"], "failed");
+    let id = v["job"]["id"].as_str().unwrap();
+    let later = get(&s.app, &format!("/v1/reconstructions/{id}"))
+        .await
+        .json();
+    assert_eq!(later["error"]["code"], "system_too_large");
+    assert_eq!(
+        get(&s.app, &format!("/v1/reconstructions/{id}/report"))
+            .await
+            .expect_error(StatusCode::CONFLICT),
+        "not_ready"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sse_streams_progress_then_done() {
     let s = start(|_| {});
-    // Keep the worker busy so the second job is observed from `queued` onwards.
+    // Keep the worker busy so the second job is observed from `queued` onwards, then cancel
+    // the first one to let the second run.
     let first = post(
         &s.app,
-        "/v1/reconstructions?resolution=48",
+        "/v1/reconstructions?resolution=200",
         "text/plain",
-        sphere_xyz(3000, 8),
+        sphere_xyz(20000, 8),
     )
     .await;
     assert_eq!(first.status, StatusCode::ACCEPTED);
+    let first_id = first.json()["id"].as_str().unwrap().to_string();
     let second = post(
         &s.app,
         &format!("/v1/reconstructions?{SMALL}"),
@@ -558,7 +568,17 @@ async fn sse_streams_progress_then_done() {
             .starts_with("/v1/reconstructions/")
     );
     let id = second.json()["id"].as_str().unwrap().to_string();
-    let ev = get(&s.app, &format!("/v1/reconstructions/{id}/events")).await;
+    let app = s.app.clone();
+    let events =
+        tokio::spawn(async move { get(&app, &format!("/v1/reconstructions/{id}/events")).await });
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert_eq!(
+        delete(&s.app, &format!("/v1/reconstructions/{first_id}"))
+            .await
+            .status,
+        StatusCode::ACCEPTED
+    );
+    let ev = events.await.unwrap();
     assert_eq!(ev.status, StatusCode::OK);
     assert_eq!(ev.headers["content-type"], "text/event-stream");
     let text = String::from_utf8(ev.body).unwrap();
@@ -775,6 +795,92 @@ async fn finished_jobs_expire() {
         "not_found"
     );
     assert!(!s.dir.path().join(&id).exists());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn random_requests_never_break_the_server() {
+    let s = start(|c| c.max_points = 5000);
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let types = [
+        "application/ply",
+        "text/plain",
+        "text/csv",
+        "model/obj",
+        "application/octet-stream",
+        "multipart/form-data; boundary=x",
+        "image/png",
+    ];
+    let good = sphere_xyz(200, 15);
+    let ply = b"ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n".to_vec();
+    for round in 0..300 {
+        let base = if round % 2 == 0 { &good } else { &ply };
+        let mut body = base[..(next() as usize % (base.len() + 1))].to_vec();
+        for _ in 0..next() % 8 {
+            if !body.is_empty() {
+                let i = next() as usize % body.len();
+                body[i] = next() as u8;
+            }
+        }
+        let ct = types[next() as usize % types.len()];
+        let a = post(&s.app, "/v1/reconstructions?resolution=16", ct, body).await;
+        match a.status.as_u16() {
+            202 => {}
+            400 | 413 | 415 | 422 => {
+                a.expect_error(a.status);
+            }
+            other => panic!(
+                "round {round}: unexpected {other}: {}",
+                String::from_utf8_lossy(&a.body)
+            ),
+        }
+    }
+    // Every accepted job ends in a terminal state and the worker is alive.
+    for j in s.state.jobs.list() {
+        let v = wait_terminal(&s.app, &j.id.to_string(), 60).await;
+        assert!(
+            matches!(v["status"].as_str(), Some("succeeded" | "failed")),
+            "{v}"
+        );
+    }
+    let a = post(
+        &s.app,
+        &format!("/v1/reconstructions?{SMALL}&wait=60"),
+        "text/plain",
+        sphere_xyz(300, 16),
+    )
+    .await;
+    assert_eq!(a.json()["status"], "succeeded");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cors_answers_only_configured_origins() {
+    let s = start(|c| c.cors_origins = vec!["https://a.example".into()]);
+    let pre = |origin: &str| {
+        Request::options("/v1/reconstructions")
+            .header("origin", origin)
+            .header("access-control-request-method", "POST")
+            .body(Body::empty())
+            .unwrap()
+    };
+    let ok = send(&s.app, pre("https://a.example")).await;
+    assert_eq!(
+        ok.headers["access-control-allow-origin"],
+        "https://a.example"
+    );
+    let other = send(&s.app, pre("https://evil.example")).await;
+    assert!(!other.headers.contains_key("access-control-allow-origin"));
+    let none = start(|_| {});
+    let a = send(&none.app, pre("https://a.example")).await;
+    assert!(
+        !a.headers.contains_key("access-control-allow-origin"),
+        "CORS is off by default"
+    );
 }
 
 #[tokio::test]

@@ -468,15 +468,9 @@ impl JobManager {
             // wrapped in `ReconError::Linalg`): when a stop was requested, that is the cause.
             Err(crate::ReconError::Cancelled) => return Err(JobError::Stopped),
             Err(_) if progress.cancelled() => return Err(JobError::Stopped),
-            Err(e) if e.is_input_problem() => {
-                return Err(JobError::Failed(ErrorBody {
-                    code: "unreconstructable".into(),
-                    message: e.to_string(),
-                }));
-            }
             Err(e) => {
                 return Err(JobError::Failed(ErrorBody {
-                    code: "reconstruction_failed".into(),
+                    code: failure_code(&e).into(),
                     message: e.to_string(),
                 }));
             }
@@ -492,6 +486,7 @@ impl JobManager {
             .map_err(|e| JobError::internal(e.to_string()))?;
         rec.report.timings_s.read = read_s;
         rec.report.timings_s.write = t.elapsed().as_secs_f64();
+        rec.report.timings_s.total += read_s + rec.report.timings_s.write;
         rec.report.memory.peak_rss_mib = crate::report::peak_rss_mib();
         let json = serde_json::to_vec_pretty(&rec.report)
             .map_err(|e| JobError::internal(e.to_string()))?;
@@ -547,6 +542,21 @@ impl JobError {
             code: "internal".into(),
             message,
         })
+    }
+}
+
+/// Error code of a failed reconstruction: `unreconstructable` (the data), `system_too_large`
+/// (the parameters ask for more than the memory budget), `reconstruction_failed` (anything else).
+fn failure_code(e: &crate::ReconError) -> &'static str {
+    if e.is_input_problem() {
+        "unreconstructable"
+    } else if matches!(
+        e,
+        crate::ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
+    ) {
+        "system_too_large"
+    } else {
+        "reconstruction_failed"
     }
 }
 

@@ -267,7 +267,9 @@ async fn finished_answer(st: &AppState, view: JobView) -> Result<Response, ApiEr
             message: "failed without a message".into(),
         });
         let status = match err.code.as_str() {
-            "unreconstructable" | "invalid_input" => StatusCode::UNPROCESSABLE_ENTITY,
+            "unreconstructable" | "invalid_input" | "system_too_large" => {
+                StatusCode::UNPROCESSABLE_ENTITY
+            }
             _ => StatusCode::INTERNAL_SERVER_ERROR,
         };
         let body = serde_json::json!({ "error": err, "job": job_response(view, None) });
