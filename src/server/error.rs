@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct ErrorBody {
     /// Stable identifier: `bad_parameter`, `unauthorized`, `not_found`, `too_large`,
-    /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`, `queue_full`,
+    /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`, `queue_full`, `busy`,
     /// `shutting_down`, `job_timeout`, `cancelled`, `internal`, ...
     pub code: String,
     /// Human-readable explanation with a hint.

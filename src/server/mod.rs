@@ -30,13 +30,18 @@ use tracing::Level;
 pub struct AppState {
     /// The job manager (queue, workers, store).
     pub jobs: Arc<JobManager>,
+    /// Uploads being received and checked at once (each holds up to `max_upload_bytes` plus the
+    /// parsed cloud): bounds the memory of concurrent uploads to `permits × (upload + cloud)`.
+    pub uploads: Arc<tokio::sync::Semaphore>,
 }
 
 impl AppState {
     /// Opens the data directory, recovers stored jobs and starts the workers.
     pub fn start(cfg: ServerConfig) -> std::io::Result<AppState> {
+        let permits = (2 * cfg.workers).max(2);
         Ok(AppState {
             jobs: JobManager::start(cfg)?,
+            uploads: Arc::new(tokio::sync::Semaphore::new(permits)),
         })
     }
 }

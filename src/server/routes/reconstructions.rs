@@ -21,6 +21,9 @@ use futures_util::StreamExt;
 use std::convert::Infallible;
 use std::time::Duration;
 
+/// How long an upload waits for a free receive slot before it is answered 429.
+const UPLOAD_SLOT_WAIT: Duration = Duration::from_secs(30);
+
 /// How the upload's bytes are to be read.
 enum BodyKind {
     /// A raw point file of this format (`None`: sniff the content).
@@ -195,7 +198,7 @@ async fn check_cloud(
         (status = 413, description = "upload or point count over the limit", body = ErrorResponse),
         (status = 415, description = "unknown format", body = ErrorResponse),
         (status = 422, description = "parses but cannot be reconstructed", body = ErrorResponse),
-        (status = 429, description = "queue full (see Retry-After)", body = ErrorResponse),
+        (status = 429, description = "queue full, or too many uploads at once (see Retry-After)", body = ErrorResponse),
         (status = 503, description = "shutting down", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_job(
@@ -222,6 +225,19 @@ pub async fn create_job(
     if !st.jobs.has_room() {
         return Err(crate::server::jobs::SubmitError::QueueFull.into());
     }
+    // At most a few uploads are buffered and parsed at once; others wait briefly, then get 429.
+    let _permit = tokio::time::timeout(UPLOAD_SLOT_WAIT, st.uploads.clone().acquire_owned())
+        .await
+        .ok()
+        .and_then(Result::ok)
+        .ok_or_else(|| {
+            ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "busy",
+                "too many uploads are being received at once; retry after the Retry-After delay",
+            )
+            .retry_after(2)
+        })?;
     let (bytes, hint) = match kind {
         BodyKind::Raw(hint) => (
             read_limited(req.into_body(), cfg.max_upload_bytes).await?,
@@ -385,20 +401,27 @@ async fn mesh_file(st: &AppState, id: &str, format: MeshFormat) -> Result<Respon
         .map_err(|e| ApiError::internal(e.to_string()))?
         .map_err(|e| ApiError::internal(e.to_string()))?;
     }
-    let bytes = tokio::fs::read(&path)
+    let file = tokio::fs::File::open(&path)
         .await
         .map_err(|e| ApiError::internal(format!("stored mesh unreadable: {e}")))?;
+    let len = file
+        .metadata()
+        .await
+        .map_err(|e| ApiError::internal(format!("stored mesh unreadable: {e}")))?
+        .len();
     let disposition = format!(
         "attachment; filename=\"rbfsurf-{}.{}\"",
         view.id,
         &name[5..]
     );
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
     Ok((
         [
             (header::CONTENT_TYPE, ctype.to_string()),
             (header::CONTENT_DISPOSITION, disposition),
+            (header::CONTENT_LENGTH, len.to_string()),
         ],
-        bytes,
+        body,
     )
         .into_response())
 }
