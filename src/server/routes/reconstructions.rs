@@ -226,7 +226,7 @@ pub async fn create_job(
         return Err(crate::server::jobs::SubmitError::QueueFull.into());
     }
     // At most a few uploads are buffered and parsed at once; others wait briefly, then get 429.
-    let _permit = tokio::time::timeout(UPLOAD_SLOT_WAIT, st.uploads.clone().acquire_owned())
+    let permit = tokio::time::timeout(UPLOAD_SLOT_WAIT, st.uploads.clone().acquire_owned())
         .await
         .ok()
         .and_then(Result::ok)
@@ -258,6 +258,7 @@ pub async fn create_job(
     let job = tokio::task::spawn_blocking(move || jobs.submit(&bytes, info, &options))
         .await
         .map_err(|e| ApiError::internal(e.to_string()))??;
+    drop(permit);
     tracing::info!(id = %job.id, points, format = format.name(), "job accepted");
     if wait > 0.0 {
         wait_for(&job, wait, cfg.max_wait).await;
