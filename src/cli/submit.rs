@@ -120,24 +120,7 @@ pub fn run(a: &SubmitArgs) -> Result<()> {
         mesh["triangles"], mesh["components"], mesh["watertight"], mesh["manifold"]
     );
     if let (Some(out), Some(fmt)) = (&a.output, out_format) {
-        let ext = match fmt {
-            MeshFormat::Glb => "glb",
-            MeshFormat::Ply => "ply",
-            MeshFormat::Obj => "obj",
-        };
-        let r = request(
-            &base,
-            "GET",
-            &format!("/v1/reconstructions/{id}/mesh.{ext}"),
-            &[],
-            &[],
-            io_timeout,
-        )?;
-        if r.status != 200 {
-            bail!("downloading the mesh failed: {}", api_error(&r));
-        }
-        write_atomic(out, &r.body)?;
-        eprintln!("wrote {}", out.display());
+        download(&base, &id, out, fmt, io_timeout)?;
     }
     if let Some(p) = &a.report {
         write_atomic(p, &serde_json::to_vec_pretty(&job["report"])?)?;
@@ -186,4 +169,27 @@ fn wait_job(
             _ => return Ok(job),
         }
     }
+}
+
+/// Downloads the mesh of job `id` in `fmt` to `out` (atomically).
+fn download(
+    base: &BaseUrl,
+    id: &str,
+    out: &std::path::Path,
+    fmt: MeshFormat,
+    timeout: Duration,
+) -> Result<()> {
+    let ext = match fmt {
+        MeshFormat::Glb => "glb",
+        MeshFormat::Ply => "ply",
+        MeshFormat::Obj => "obj",
+    };
+    let path = format!("/v1/reconstructions/{id}/mesh.{ext}");
+    let r = request(base, "GET", &path, &[], &[], timeout)?;
+    if r.status != 200 {
+        bail!("downloading the mesh failed: {}", api_error(&r));
+    }
+    write_atomic(out, &r.body)?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
 }
