@@ -43,6 +43,22 @@ impl From<crate::rbf::CarrierError> for ReconError {
 }
 
 impl ReconError {
+    /// True for a stop the caller asked for, whichever stage noticed it.
+    pub fn is_cancelled(&self) -> bool {
+        use crate::linalg::LinalgError;
+        use crate::polygonize::PolygonizeError;
+        use crate::rbf::RbfError;
+        use crate::variational::VariationalError;
+        matches!(
+            self,
+            ReconError::Cancelled
+                | ReconError::Linalg(LinalgError::Cancelled)
+                | ReconError::Rbf(RbfError::Cancelled)
+                | ReconError::Polygonize(PolygonizeError::Cancelled)
+                | ReconError::Variational(VariationalError::Cancelled)
+        )
+    }
+
     /// True when the input data (not the parameters or the machine) is at fault: the HTTP API answers 422.
     pub fn is_input_problem(&self) -> bool {
         matches!(

@@ -23,6 +23,7 @@ pub mod polygonize;
 pub mod progress;
 pub mod rbf;
 pub mod report;
+pub mod server;
 pub mod spatial;
 pub mod variational;
 

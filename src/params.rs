@@ -259,16 +259,28 @@ impl ReconParams {
 /// shared by the command line (flattened into `rbfsurf reconstruct`) and the HTTP API (query string
 /// or multipart fields, same kebab-case names). Converted and validated by
 /// `ReconParams::try_from(&ReconOptions)`.
-#[derive(Debug, Clone, Default, PartialEq, clap::Args, serde::Deserialize, serde::Serialize)]
+#[derive(
+    Debug,
+    Clone,
+    Default,
+    PartialEq,
+    clap::Args,
+    serde::Deserialize,
+    serde::Serialize,
+    utoipa::IntoParams,
+)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
 pub struct ReconOptions {
     /// Method: csrbf (default), variational (Turk–O'Brien r³, dense, ≤ ~5k points), mls (Shen).
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub method: Option<Method>,
     /// Kernel: wendland-c0 (seed), wendland-c2 (default), wendland-c4.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub kernel: Option<Kernel>,
     /// Support radius R in normalised units (the longest bbox edge is 1).
     #[arg(long, conflicts_with = "neighbours", allow_negative_numbers = true)]
@@ -281,18 +293,22 @@ pub struct ReconOptions {
     /// Carrier solid: auto (default: local with normals, else ellipsoid), sphere, ellipsoid, local.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub carrier: Option<crate::rbf::CarrierKind>,
     /// Matrix ordering: none, bfs (default, seed Algorithm III), rcm.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub ordering: Option<OrderingKind>,
     /// Solver: sparse (default, faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl).
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub solver: Option<SolverKind>,
     /// Polynomial part: none (default) or linear (doubly bordered system).
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub polynomial: Option<Polynomial>,
     /// Marching grid cells along the longest axis (default: from the point spacing, 64..320).
     #[arg(long)]
@@ -301,6 +317,7 @@ pub struct ReconOptions {
     /// Spatial index: octree (default) or kdtree.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub index: Option<IndexKind>,
     /// Octree leaf size K (default 16).
     #[arg(long)]
@@ -325,6 +342,7 @@ pub struct ReconOptions {
     /// Unsupported surface: auto (default: trim with the local carrier, closed otherwise), trim, closed.
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
     pub boundary: Option<Boundary>,
 }
 

@@ -183,16 +183,7 @@ fn cancellation_stops_the_work() {
     let err = reconstruct(&cloud, &ReconParams::default(), &flag)
         .err()
         .expect("cancelled");
-    assert!(
-        matches!(
-            err,
-            ReconError::Cancelled
-                | ReconError::Rbf(_)
-                | ReconError::Linalg(_)
-                | ReconError::Polygonize(_)
-        ),
-        "{err:?}"
-    );
+    assert!(matches!(err, ReconError::Cancelled), "{err:?}");
     assert!(err.to_string().contains("cancel"), "{err}");
 }
 

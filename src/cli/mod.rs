@@ -1,12 +1,15 @@
-//! The command line: `reconstruct`, `compare`, `generate`, `bench`. Parses arguments, calls the
+//! The command line: `reconstruct`, `compare`, `generate`, `bench`, `serve`, `submit`, `openapi`. Parses arguments, calls the
 //! library, prints one-line errors. No numerical code lives here.
 
 mod bench;
 mod compare;
 mod curve;
 mod generate;
+mod http;
 pub mod progress;
 mod reconstruct;
+mod serve;
+mod submit;
 
 use clap::{Parser, Subcommand};
 
@@ -32,6 +35,12 @@ pub enum Command {
     Curve(curve::CurveArgs),
     /// Run a benchmark and print a table (`table1`: the seed's Table 1; `scaling`: N = 10k..300k).
     Bench(bench::BenchArgs),
+    /// Run the HTTP service: REST API, job queue, WebGL viewer at `/`.
+    Serve(serve::ServeArgs),
+    /// Upload a point file to a running server, wait, download the mesh (non-zero exit on failure).
+    Submit(submit::SubmitArgs),
+    /// Print the OpenAPI document of the HTTP API.
+    Openapi(serve::OpenApiArgs),
 }
 
 /// Run the command line with these arguments (the first is the program name); returns the exit code.
@@ -64,6 +73,9 @@ where
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
         Command::Curve(a) => curve::run(&a),
+        Command::Serve(a) => serve::run(&a),
+        Command::Submit(a) => submit::run(&a),
+        Command::Openapi(a) => serve::run_openapi(&a),
     };
     match result {
         Ok(()) => 0,

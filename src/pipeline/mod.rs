@@ -58,7 +58,22 @@ pub struct FittedField {
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
+/// A cancellation noticed by any stage comes back as [`ReconError::Cancelled`].
 pub fn reconstruct(
+    cloud: &PointCloud,
+    params: &ReconParams,
+    progress: &dyn Progress,
+) -> Result<Reconstruction, ReconError> {
+    reconstruct_inner(cloud, params, progress).map_err(|e| {
+        if e.is_cancelled() {
+            ReconError::Cancelled
+        } else {
+            e
+        }
+    })
+}
+
+fn reconstruct_inner(
     cloud: &PointCloud,
     params: &ReconParams,
     progress: &dyn Progress,

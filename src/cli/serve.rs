@@ -1,0 +1,121 @@
+//! `rbfsurf serve` and `rbfsurf openapi`: flags → [`ServerConfig`], a tokio runtime, the server.
+
+use crate::server::config::ServerConfig;
+use anyhow::{Context, Result, bail};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Arguments of `serve`; every limit defaults to [`ServerConfig::default`].
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ServeArgs {
+    /// Listen address [default: 127.0.0.1:8080].
+    #[arg(long)]
+    pub addr: Option<SocketAddr>,
+    /// Directory for jobs (inputs, parameters, status, reports, meshes) [default: ./rbfsurf-data].
+    #[arg(long)]
+    pub data_dir: Option<PathBuf>,
+    /// Worker threads running reconstructions [default: 1].
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Jobs allowed to wait for a worker; more are refused with 429 [default: 16].
+    #[arg(long)]
+    pub max_queue: Option<usize>,
+    /// Largest upload in MiB; larger ones get 413 [default: 256].
+    #[arg(long)]
+    pub max_upload_mib: Option<u64>,
+    /// Largest point count per upload [default: 5000000].
+    #[arg(long)]
+    pub max_points: Option<usize>,
+    /// A running job fails after this many seconds [default: 600].
+    #[arg(long)]
+    pub job_timeout_s: Option<u64>,
+    /// Delete finished jobs this many hours after they finished; 0 keeps them [default: 168].
+    #[arg(long)]
+    pub expire_hours: Option<u64>,
+    /// Bearer token required on POST and DELETE (or set RBFSURF_TOKEN) [default: none].
+    #[arg(long)]
+    pub token: Option<String>,
+    /// Allow cross-origin requests from this origin (repeatable; `*` = any) [default: none].
+    #[arg(long = "cors-origin")]
+    pub cors_origins: Vec<String>,
+}
+
+impl ServeArgs {
+    /// The server configuration these flags describe.
+    pub fn config(&self) -> Result<ServerConfig> {
+        let d = ServerConfig::default();
+        let workers = self.workers.unwrap_or(d.workers);
+        if !(1..=256).contains(&workers) {
+            bail!("--workers {workers}: use 1..=256");
+        }
+        let mib = self.max_upload_mib.unwrap_or(d.max_upload_bytes >> 20);
+        if !(1..=1 << 20).contains(&mib) {
+            bail!("--max-upload-mib {mib}: use 1..=1048576");
+        }
+        let timeout = self.job_timeout_s.unwrap_or(d.job_timeout.as_secs());
+        if timeout == 0 {
+            bail!("--job-timeout-s 0: give a positive number of seconds");
+        }
+        let token = self
+            .token
+            .clone()
+            .or_else(|| std::env::var("RBFSURF_TOKEN").ok())
+            .filter(|t| !t.is_empty());
+        Ok(ServerConfig {
+            addr: self.addr.unwrap_or(d.addr),
+            data_dir: self.data_dir.clone().unwrap_or(d.data_dir),
+            workers,
+            max_queue: self.max_queue.unwrap_or(d.max_queue),
+            max_upload_bytes: mib << 20,
+            max_points: self.max_points.unwrap_or(d.max_points),
+            job_timeout: Duration::from_secs(timeout),
+            expire_after: match self.expire_hours {
+                Some(0) => None,
+                Some(h) => Some(Duration::from_secs(h.saturating_mul(3600))),
+                None => d.expire_after,
+            },
+            token,
+            cors_origins: self.cors_origins.clone(),
+            max_wait: d.max_wait,
+        })
+    }
+}
+
+/// Runs the server until Ctrl-C / SIGTERM.
+pub fn run(a: &ServeArgs) -> Result<()> {
+    let cfg = a.config()?;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .try_init();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    let addr = cfg.addr;
+    let dir = cfg.data_dir.display().to_string();
+    rt.block_on(crate::server::serve(cfg))
+        .with_context(|| format!("serving on {addr} with data directory {dir}"))
+}
+
+/// Arguments of `openapi`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct OpenApiArgs {
+    /// Write the document here (atomically) instead of stdout.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+/// Prints (or writes) the OpenAPI document of the HTTP API.
+pub fn run_openapi(a: &OpenApiArgs) -> Result<()> {
+    let json = crate::server::openapi::openapi_json();
+    match &a.output {
+        Some(p) => crate::io::write_atomic(p, json.as_bytes())?,
+        None => print!("{json}"),
+    }
+    Ok(())
+}

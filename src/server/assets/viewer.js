@@ -1,0 +1,296 @@
+// rbfsurf viewer: upload a point file, follow the job by server-sent events, then show the
+// returned binary glTF with plain WebGL (no libraries, works offline). The GLB reader handles the
+// files rbfsurf writes: one indexed triangle primitive with POSITION (+ NORMAL).
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+let chosen = null;
+
+// ---------- upload and job tracking ----------
+function mediaType(name) {
+  const ext = name.split(".").pop().toLowerCase();
+  return { ply: "application/ply", csv: "text/csv", obj: "model/obj", xyz: "text/plain",
+           pts: "text/plain", txt: "text/plain" }[ext] || "application/octet-stream";
+}
+
+function setStatus(text, isError) {
+  $("status").textContent = text;
+  $("status").className = isError ? "error" : "";
+}
+
+function choose(file) {
+  chosen = file;
+  $("filename").textContent = file ? `${file.name} (${(file.size / 1024).toFixed(0)} KiB)` : "";
+  $("go").disabled = !file;
+  if (file) setStatus("Ready: press Reconstruct.");
+}
+
+function queryString() {
+  const q = new URLSearchParams();
+  for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver"]) {
+    const v = $(k).value.trim();
+    if (v) q.set(k, v);
+  }
+  return q.toString();
+}
+
+async function submit() {
+  if (!chosen) return;
+  $("go").disabled = true;
+  $("stats").innerHTML = "";
+  $("links").innerHTML = "";
+  $("bar").value = 0;
+  setStatus("Uploading…");
+  const headers = { "Content-Type": mediaType(chosen.name) };
+  const token = $("token").value.trim();
+  if (token) headers["Authorization"] = "Bearer " + token;
+  try {
+    const r = await fetch("/v1/reconstructions?" + queryString(), { method: "POST", headers, body: chosen });
+    const body = await r.json();
+    if (!r.ok) throw new Error(body.error ? `${body.error.code}: ${body.error.message}` : `HTTP ${r.status}`);
+    location.hash = "job=" + body.id;
+    follow(body.id);
+  } catch (e) {
+    setStatus("Upload failed: " + e.message, true);
+    $("go").disabled = false;
+  }
+}
+
+function follow(id) {
+  setStatus("Queued…");
+  const es = new EventSource(`/v1/reconstructions/${id}/events`);
+  const show = (ev) => {
+    const v = JSON.parse(ev.data);
+    $("bar").value = v.progress;
+    if (v.status === "queued") setStatus("Queued…");
+    else if (v.status === "running") setStatus(`Running: ${v.stage || "…"} ${(100 * v.stage_progress).toFixed(0)}%`);
+    return v;
+  };
+  es.addEventListener("progress", show);
+  es.addEventListener("done", (ev) => {
+    es.close();
+    const v = show(ev);
+    finished(v);
+  });
+  es.onerror = () => {
+    es.close();
+    // The stream can drop (proxies, restarts): fall back to one blocking status request.
+    fetch(`/v1/reconstructions/${id}?wait=600`).then((r) => r.json()).then((v) => {
+      if (v.error && !v.id) setStatus(`${v.error.code}: ${v.error.message}`, true);
+      else finished(v);
+    });
+  };
+}
+
+async function finished(v) {
+  $("go").disabled = !chosen;
+  if (v.status !== "succeeded") {
+    const err = v.error ? `${v.error.code}: ${v.error.message}` : v.status;
+    setStatus(`Job ${v.status}: ${err}`, true);
+    return;
+  }
+  setStatus("Downloading mesh…");
+  const job = await (await fetch(`/v1/reconstructions/${v.id}`)).json();
+  showStats(job.report);
+  const base = `/v1/reconstructions/${v.id}`;
+  $("links").innerHTML = `Download: <a href="${base}/mesh.glb" download>GLB</a> · ` +
+    `<a href="${base}/mesh.ply" download>PLY</a> · <a href="${base}/mesh.obj" download>OBJ</a> · ` +
+    `<a href="${base}/report" target="_blank">report</a>`;
+  try {
+    const buf = await (await fetch(`${base}/mesh.glb`)).arrayBuffer();
+    const mesh = parseGlb(buf);
+    viewer.setMesh(mesh);
+    setStatus(`loaded ${mesh.indices.length / 3} triangles`);
+  } catch (e) {
+    setStatus("Cannot display the mesh: " + e.message, true);
+  }
+}
+
+function showStats(r) {
+  if (!r) return;
+  const rows = [
+    ["points used", `${r.input.used} of ${r.input.points}`],
+    ["triangles", r.mesh.triangles], ["vertices", r.mesh.vertices],
+    ["components", r.mesh.components], ["watertight", r.mesh.watertight],
+    ["manifold", r.mesh.manifold], ["genus", r.mesh.genus],
+    ["kernel", r.params.kernel], ["carrier", r.params.carrier],
+    ["support", r.params.support.toPrecision(3)], ["resolution", r.params.resolution],
+    ["matrix nnz", r.matrix.nnz], ["residual max", r.residual.max.toExponential(1)],
+    ["total time", r.timings_s.total.toFixed(2) + " s"], ["peak memory", r.memory.peak_rss_mib.toFixed(0) + " MiB"],
+  ];
+  $("stats").innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+}
+
+// ---------- GLB reader ----------
+function parseGlb(buf) {
+  const dv = new DataView(buf);
+  if (buf.byteLength < 20 || dv.getUint32(0, true) !== 0x46546c67) throw new Error("not a GLB file");
+  let off = 12, json = null, bin = null;
+  while (off + 8 <= buf.byteLength) {
+    const len = dv.getUint32(off, true), type = dv.getUint32(off + 4, true);
+    const start = off + 8;
+    if (type === 0x4e4f534a) json = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, start, len)));
+    else if (type === 0x004e4942) bin = buf.slice(start, start + len);
+    off = start + len;
+  }
+  if (!json || !bin) throw new Error("GLB without JSON or BIN chunk");
+  const prim = json.meshes[0].primitives[0];
+  const read = (index, comps) => {
+    const acc = json.accessors[index];
+    const view = json.bufferViews[acc.bufferView];
+    const start = (view.byteOffset || 0) + (acc.byteOffset || 0);
+    const Types = { 5126: Float32Array, 5125: Uint32Array, 5123: Uint16Array, 5121: Uint8Array };
+    const T = Types[acc.componentType];
+    if (!T) throw new Error("unsupported component type " + acc.componentType);
+    const stride = view.byteStride || T.BYTES_PER_ELEMENT * comps;
+    const out = new T(acc.count * comps);
+    const src = new DataView(bin);
+    for (let i = 0; i < acc.count; i++) {
+      for (let c = 0; c < comps; c++) {
+        const at = start + i * stride + c * T.BYTES_PER_ELEMENT;
+        out[i * comps + c] = T === Float32Array ? src.getFloat32(at, true) : T === Uint32Array ? src.getUint32(at, true)
+          : T === Uint16Array ? src.getUint16(at, true) : src.getUint8(at);
+      }
+    }
+    return out;
+  };
+  const positions = read(prim.attributes.POSITION, 3);
+  const indices = Uint32Array.from(read(prim.indices, 1));
+  const normals = prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : vertexNormals(positions, indices);
+  return { positions, normals, indices };
+}
+
+function vertexNormals(p, idx) {
+  const n = new Float32Array(p.length);
+  for (let t = 0; t < idx.length; t += 3) {
+    const [a, b, c] = [idx[t] * 3, idx[t + 1] * 3, idx[t + 2] * 3];
+    const u = [p[b] - p[a], p[b + 1] - p[a + 1], p[b + 2] - p[a + 2]];
+    const v = [p[c] - p[a], p[c + 1] - p[a + 1], p[c + 2] - p[a + 2]];
+    const f = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    for (const k of [a, b, c]) for (let d = 0; d < 3; d++) n[k + d] += f[d];
+  }
+  return n;
+}
+
+// ---------- WebGL viewer ----------
+function createViewer(canvas) {
+  const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: true }) ||
+             canvas.getContext("webgl", { preserveDrawingBuffer: true, antialias: true });
+  if (!gl) { setStatus("WebGL is not available in this browser.", true); return { setMesh() {} }; }
+  const isGl2 = typeof WebGL2RenderingContext !== "undefined" && gl instanceof WebGL2RenderingContext;
+  if (!isGl2 && !gl.getExtension("OES_element_index_uint")) setStatus("32-bit indices unsupported.", true);
+  const vs = `attribute vec3 aPos; attribute vec3 aNrm; uniform mat4 uMvp; uniform mat4 uView; varying vec3 vN;
+    void main() { gl_Position = uMvp * vec4(aPos, 1.0); vN = mat3(uView) * aNrm; }`;
+  const fs = `precision mediump float; varying vec3 vN; uniform vec3 uColor;
+    void main() { vec3 n = normalize(vN); float d = abs(n.z);
+      gl_FragColor = vec4(uColor * (0.25 + 0.75 * d) + vec3(0.15) * pow(d, 24.0), 1.0); }`;
+  const compile = (type, src) => {
+    const s = gl.createShader(type); gl.shaderSource(s, src); gl.compileShader(s);
+    if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+    return s;
+  };
+  const prog = gl.createProgram();
+  gl.attachShader(prog, compile(gl.VERTEX_SHADER, vs));
+  gl.attachShader(prog, compile(gl.FRAGMENT_SHADER, fs));
+  gl.linkProgram(prog);
+  const loc = { pos: gl.getAttribLocation(prog, "aPos"), nrm: gl.getAttribLocation(prog, "aNrm"),
+    mvp: gl.getUniformLocation(prog, "uMvp"), view: gl.getUniformLocation(prog, "uView"),
+    color: gl.getUniformLocation(prog, "uColor") };
+  const state = { yaw: 0.6, pitch: 0.35, dist: 3.4, count: 0, center: [0, 0, 0], scale: 1 };
+  let buffers = null;
+
+  function setMesh(m) {
+    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let i = 0; i < m.positions.length; i += 3)
+      for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], m.positions[i + d]); hi[d] = Math.max(hi[d], m.positions[i + d]); }
+    state.center = lo.map((l, d) => (l + hi[d]) / 2);
+    state.scale = 2 / Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-30);
+    const mk = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
+    buffers = { pos: mk(gl.ARRAY_BUFFER, m.positions), nrm: mk(gl.ARRAY_BUFFER, new Float32Array(m.normals)),
+                idx: mk(gl.ELEMENT_ARRAY_BUFFER, m.indices) };
+    state.count = m.indices.length;
+    resetView();
+  }
+
+  function resetView() { state.yaw = 0.6; state.pitch = 0.35; state.dist = 3.4; draw(); }
+
+  function draw() {
+    const w = canvas.clientWidth * devicePixelRatio | 0, h = canvas.clientHeight * devicePixelRatio | 0;
+    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    gl.viewport(0, 0, w, h);
+    gl.clearColor(0.114, 0.129, 0.153, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    if (!buffers) return;
+    gl.enable(gl.DEPTH_TEST);
+    gl.useProgram(prog);
+    const s = state.scale, c = state.center;
+    const model = [s, 0, 0, 0, 0, s, 0, 0, 0, 0, s, 0, -c[0] * s, -c[1] * s, -c[2] * s, 1];
+    const eye = [state.dist * Math.cos(state.pitch) * Math.sin(state.yaw), state.dist * Math.sin(state.pitch),
+                 state.dist * Math.cos(state.pitch) * Math.cos(state.yaw)];
+    const view = mul(lookAt(eye, [0, 0, 0], [0, 1, 0]), model);
+    const proj = perspective(0.8, w / Math.max(h, 1), 0.01, 100);
+    gl.uniformMatrix4fv(loc.mvp, false, mul(proj, view));
+    gl.uniformMatrix4fv(loc.view, false, view);
+    gl.uniform3f(loc.color, 0.88, 0.53, 0.23);
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffers.pos);
+    gl.enableVertexAttribArray(loc.pos); gl.vertexAttribPointer(loc.pos, 3, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffers.nrm);
+    gl.enableVertexAttribArray(loc.nrm); gl.vertexAttribPointer(loc.nrm, 3, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.idx);
+    gl.drawElements(gl.TRIANGLES, state.count, gl.UNSIGNED_INT, 0);
+  }
+
+  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => { drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    state.yaw -= (e.clientX - drag[0]) * 0.01;
+    state.pitch = Math.max(-1.5, Math.min(1.5, state.pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw();
+  });
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    state.dist = Math.max(0.3, Math.min(50, state.dist * Math.exp(e.deltaY * 0.001)));
+    draw();
+  }, { passive: false });
+  canvas.addEventListener("dblclick", resetView);
+  addEventListener("resize", draw);
+  draw();
+  return { setMesh, draw };
+}
+
+// Column-major 4×4 helpers.
+function mul(a, b) {
+  const o = new Array(16).fill(0);
+  for (let i = 0; i < 4; i++) for (let j = 0; j < 4; j++) for (let k = 0; k < 4; k++) o[j * 4 + i] += a[k * 4 + i] * b[j * 4 + k];
+  return o;
+}
+function perspective(fovy, aspect, near, far) {
+  const f = 1 / Math.tan(fovy / 2), nf = 1 / (near - far);
+  return [f / aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + near) * nf, -1, 0, 0, 2 * far * near * nf, 0];
+}
+function lookAt(eye, at, up) {
+  const norm = (v) => { const l = Math.hypot(...v) || 1; return v.map((x) => x / l); };
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const z = norm(eye.map((e, i) => e - at[i])), x = norm(cross(up, z)), y = cross(z, x);
+  return [x[0], y[0], z[0], 0, x[1], y[1], z[1], 0, x[2], y[2], z[2], 0, -dot(x, eye), -dot(y, eye), -dot(z, eye), 1];
+}
+
+// ---------- wiring ----------
+const viewer = createViewer($("view"));
+const drop = $("drop");
+drop.addEventListener("click", () => $("file").click());
+$("file").addEventListener("change", (e) => choose(e.target.files[0]));
+drop.addEventListener("dragover", (e) => { e.preventDefault(); drop.classList.add("over"); });
+drop.addEventListener("dragleave", () => drop.classList.remove("over"));
+drop.addEventListener("drop", (e) => {
+  e.preventDefault();
+  drop.classList.remove("over");
+  if (e.dataTransfer.files.length) choose(e.dataTransfer.files[0]);
+});
+$("go").addEventListener("click", submit);
+const m = location.hash.match(/job=([0-9a-f-]{36})/);
+if (m) follow(m[1]);

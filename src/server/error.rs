@@ -1,0 +1,152 @@
+//! The API's one error type: an HTTP status plus a stable machine-readable `code` and a message
+//! that tells the caller what to do. Rendered as `{"error": {"code": "...", "message": "..."}}`.
+
+use axum::Json;
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+
+/// The JSON error object (`error` member of every error response, and of a failed job).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ErrorBody {
+    /// Stable identifier: `bad_parameter`, `unauthorized`, `not_found`, `too_large`,
+    /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`, `queue_full`, `busy`,
+    /// `shutting_down`, `job_timeout`, `cancelled`, `internal`, ...
+    pub code: String,
+    /// Human-readable explanation with a hint.
+    pub message: String,
+}
+
+/// Envelope of every error response.
+#[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ErrorResponse {
+    /// The error.
+    pub error: ErrorBody,
+}
+
+/// An error answer: status, code, message and an optional `Retry-After` (seconds).
+#[derive(Debug, Clone)]
+pub struct ApiError {
+    /// HTTP status.
+    pub status: StatusCode,
+    /// Body.
+    pub body: ErrorBody,
+    /// `Retry-After` header value in seconds (429/503).
+    pub retry_after: Option<u64>,
+}
+
+impl ApiError {
+    /// An error with this status, code and message.
+    pub fn new(status: StatusCode, code: &str, message: impl Into<String>) -> Self {
+        ApiError {
+            status,
+            body: ErrorBody {
+                code: code.to_string(),
+                message: message.into(),
+            },
+            retry_after: None,
+        }
+    }
+
+    /// 400 `bad_parameter`.
+    pub fn bad_parameter(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::BAD_REQUEST, "bad_parameter", message)
+    }
+
+    /// 404 `not_found` for a job id.
+    pub fn not_found(what: &str) -> Self {
+        Self::new(
+            StatusCode::NOT_FOUND,
+            "not_found",
+            format!(
+                "{what} not found; it may have expired or been deleted (list ids from the POST answers)"
+            ),
+        )
+    }
+
+    /// 413 `too_large`.
+    pub fn too_large(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::PAYLOAD_TOO_LARGE, "too_large", message)
+    }
+
+    /// 500 `internal` (logged).
+    pub fn internal(message: impl Into<String>) -> Self {
+        let message = message.into();
+        tracing::error!(%message, "internal error");
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+    }
+
+    /// Adds `Retry-After: secs`.
+    pub fn retry_after(mut self, secs: u64) -> Self {
+        self.retry_after = Some(secs);
+        self
+    }
+}
+
+impl std::fmt::Display for ApiError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {}: {}",
+            self.status, self.body.code, self.body.message
+        )
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let mut resp = (
+            self.status,
+            Json(ErrorResponse {
+                error: self.body.clone(),
+            }),
+        )
+            .into_response();
+        if self.status == StatusCode::UNAUTHORIZED {
+            resp.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        if let Some(s) = self.retry_after {
+            resp.headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        resp
+    }
+}
+
+impl From<crate::io::IoError> for ApiError {
+    /// Reader errors: unknown format → 415, over a limit → 413, anything else about the bytes → 422.
+    fn from(e: crate::io::IoError) -> Self {
+        use crate::io::IoError as E;
+        let status = match &e {
+            E::UnknownFormat { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            E::TooLarge { .. } | E::TooManyPoints { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            E::Open { .. } | E::Read { .. } | E::Write { .. } | E::Encode { .. } => {
+                return ApiError::internal(e.to_string());
+            }
+            _ => StatusCode::UNPROCESSABLE_ENTITY,
+        };
+        let code = match status {
+            StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+            StatusCode::PAYLOAD_TOO_LARGE => "too_large",
+            _ => "invalid_input",
+        };
+        ApiError::new(status, code, e.to_string())
+    }
+}
+
+impl From<crate::params::ParamError> for ApiError {
+    fn from(e: crate::params::ParamError) -> Self {
+        ApiError::bad_parameter(e.to_string())
+    }
+}
+
+impl From<crate::geometry::clean::InputError> for ApiError {
+    fn from(e: crate::geometry::clean::InputError) -> Self {
+        ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "unreconstructable",
+            e.to_string(),
+        )
+    }
+}

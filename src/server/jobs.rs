@@ -1,0 +1,601 @@
+//! Jobs: a bounded queue, a fixed pool of worker threads (off the async reactor), per-job progress
+//! (a `tokio::sync::watch` channel feeding status, `?wait` and server-sent events), cancellation,
+//! time limits, persistence through [`Store`], restart recovery and expiry.
+//!
+//! Restart policy: jobs stored as `queued` are re-queued (their input and options are on disk);
+//! jobs stored as `running` (the server died mid-job) are marked `failed` with code `interrupted`.
+//! A graceful shutdown stops running jobs and stores them as `queued` again, so they run after
+//! the restart. Queue operations are O(1); a scan at start-up is O(stored jobs).
+
+use super::config::ServerConfig;
+use super::error::{ApiError, ErrorBody};
+use super::store::{Store, unfinished};
+use crate::io::{ReadLimits, encode_glb, parse_point_cloud, write_atomic};
+use crate::params::ReconParams;
+use crate::progress::Progress;
+use axum::http::StatusCode;
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use tokio::sync::watch;
+use uuid::Uuid;
+
+pub use super::model::{InputInfo, JobStatus, JobView, unix_now};
+
+/// One job: its observable state plus the control flags the worker polls.
+pub struct Job {
+    /// Job id.
+    pub id: Uuid,
+    tx: watch::Sender<JobView>,
+    cancel: AtomicBool,
+    /// Unix-epoch milliseconds after which the running job is stopped (0 = none).
+    deadline_ms: AtomicU64,
+}
+
+impl Job {
+    fn new(view: JobView) -> Arc<Job> {
+        Arc::new(Job {
+            id: view.id,
+            tx: watch::Sender::new(view),
+            cancel: AtomicBool::new(false),
+            deadline_ms: AtomicU64::new(0),
+        })
+    }
+
+    /// A snapshot of the current state.
+    pub fn view(&self) -> JobView {
+        self.tx.borrow().clone()
+    }
+
+    /// A receiver that sees every state change (for `?wait` and server-sent events).
+    pub fn subscribe(&self) -> watch::Receiver<JobView> {
+        self.tx.subscribe()
+    }
+
+    fn timed_out(&self) -> bool {
+        let d = self.deadline_ms.load(Ordering::Relaxed);
+        d != 0 && now_ms() >= d
+    }
+}
+
+fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// Stage weights of the overall progress estimate (sum 1).
+const STAGES: [(&str, f64); 11] = [
+    ("read", 0.02),
+    ("clean", 0.02),
+    ("index", 0.03),
+    ("carrier", 0.03),
+    ("assemble", 0.10),
+    ("order", 0.05),
+    ("factor", 0.25),
+    ("solve", 0.05),
+    ("polygonize", 0.35),
+    ("post", 0.05),
+    ("write", 0.05),
+];
+
+fn overall(stage: &str, fraction: f64) -> Option<f64> {
+    let i = STAGES.iter().position(|(s, _)| *s == stage)?;
+    let before: f64 = STAGES[..i].iter().map(|(_, w)| w).sum();
+    Some(before + STAGES[i].1 * fraction.clamp(0.0, 1.0))
+}
+
+/// The [`Progress`] of a running job: publishes stage + fraction (throttled to steps of 1 %)
+/// and answers `cancelled()` for a DELETE, a shutdown or the time limit.
+struct JobProgress<'a> {
+    job: &'a Job,
+    shutdown: &'a AtomicBool,
+    last_percent: AtomicU64,
+}
+
+impl Progress for JobProgress<'_> {
+    fn stage(&self, name: &str) {
+        self.last_percent.store(0, Ordering::Relaxed);
+        self.job.tx.send_modify(|v| {
+            v.stage = Some(name.to_string());
+            v.stage_progress = 0.0;
+            if let Some(p) = overall(name, 0.0) {
+                v.progress = v.progress.max(p);
+            }
+        });
+    }
+
+    fn fraction(&self, done: f64) {
+        let pct = (done.clamp(0.0, 1.0) * 100.0) as u64;
+        if self.last_percent.swap(pct, Ordering::Relaxed) == pct {
+            return;
+        }
+        self.job.tx.send_modify(|v| {
+            v.stage_progress = done.clamp(0.0, 1.0);
+            if let Some(p) = v.stage.as_deref().and_then(|s| overall(s, done)) {
+                v.progress = v.progress.max(p);
+            }
+        });
+    }
+
+    fn cancelled(&self) -> bool {
+        self.job.cancel.load(Ordering::Relaxed)
+            || self.shutdown.load(Ordering::Relaxed)
+            || self.job.timed_out()
+    }
+}
+
+/// Owns every job, the queue and the worker threads.
+pub struct JobManager {
+    cfg: ServerConfig,
+    store: Store,
+    jobs: RwLock<HashMap<Uuid, Arc<Job>>>,
+    queue: Mutex<VecDeque<Arc<Job>>>,
+    wake: Condvar,
+    shutdown: AtomicBool,
+    workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
+}
+
+/// Why a submission was refused by the queue.
+pub enum SubmitError {
+    /// The queue holds `max_queue` jobs.
+    QueueFull,
+    /// The server is shutting down.
+    ShuttingDown,
+    /// The job could not be stored.
+    Storage(String),
+}
+
+impl From<SubmitError> for ApiError {
+    fn from(e: SubmitError) -> Self {
+        match e {
+            SubmitError::QueueFull => ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "queue_full",
+                "the job queue is full; retry after the Retry-After delay",
+            )
+            .retry_after(5),
+            SubmitError::ShuttingDown => ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "shutting_down",
+                "the server is shutting down; retry against the restarted server",
+            )
+            .retry_after(10),
+            SubmitError::Storage(m) => ApiError::internal(m),
+        }
+    }
+}
+
+impl JobManager {
+    /// Opens the data directory, recovers stored jobs (see the module doc for the policy) and
+    /// starts `cfg.workers` worker threads.
+    pub fn start(cfg: ServerConfig) -> std::io::Result<Arc<JobManager>> {
+        let store = Store::open(&cfg.data_dir)?;
+        let mgr = Arc::new(JobManager {
+            cfg,
+            store,
+            jobs: RwLock::new(HashMap::new()),
+            queue: Mutex::new(VecDeque::new()),
+            wake: Condvar::new(),
+            shutdown: AtomicBool::new(false),
+            workers: Mutex::new(Vec::new()),
+        });
+        mgr.recover()?;
+        let n = mgr.cfg.workers.max(1);
+        let handles = (0..n)
+            .map(|i| {
+                let m = Arc::clone(&mgr);
+                std::thread::Builder::new()
+                    .name(format!("rbfsurf-worker-{i}"))
+                    .spawn(move || m.worker_loop())
+            })
+            .collect::<std::io::Result<Vec<_>>>()?;
+        *lock(&mgr.workers) = handles;
+        Ok(mgr)
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &ServerConfig {
+        &self.cfg
+    }
+
+    /// The job store.
+    pub fn store(&self) -> &Store {
+        &self.store
+    }
+
+    fn recover(&self) -> std::io::Result<()> {
+        let mut requeued = 0;
+        let mut interrupted = 0;
+        for mut view in self.store.scan()? {
+            if unfinished(view.status) {
+                if view.status == JobStatus::Running {
+                    view.status = JobStatus::Failed;
+                    view.finished_at = Some(unix_now());
+                    view.error = Some(ErrorBody {
+                        code: "interrupted".into(),
+                        message: "the server stopped while this job was running; submit it again"
+                            .into(),
+                    });
+                    interrupted += 1;
+                } else {
+                    requeued += 1;
+                }
+                if let Err(e) = self.store.save_status(&view) {
+                    tracing::warn!(id = %view.id, error = %e, "cannot update recovered job");
+                }
+            }
+            let job = Job::new(view);
+            if job.view().status == JobStatus::Queued {
+                lock(&self.queue).push_back(Arc::clone(&job));
+            }
+            write(&self.jobs).insert(job.id, job);
+        }
+        let total = read(&self.jobs).len();
+        tracing::info!(total, requeued, interrupted, dir = %self.cfg.data_dir.display(), "job store opened");
+        Ok(())
+    }
+
+    /// Stores a new job and queues it; refuses when the queue is full or the server stops.
+    pub fn submit(
+        &self,
+        input: &[u8],
+        info: InputInfo,
+        options: &crate::params::ReconOptions,
+    ) -> Result<Arc<Job>, SubmitError> {
+        if self.shutdown.load(Ordering::SeqCst) {
+            return Err(SubmitError::ShuttingDown);
+        }
+        let view = JobView {
+            id: Uuid::new_v4(),
+            status: JobStatus::Queued,
+            stage: None,
+            progress: 0.0,
+            stage_progress: 0.0,
+            created_at: unix_now(),
+            started_at: None,
+            finished_at: None,
+            error: None,
+            input: info,
+            triangles: None,
+        };
+        let mut queue = lock(&self.queue);
+        if queue.len() >= self.cfg.max_queue {
+            return Err(SubmitError::QueueFull);
+        }
+        if let Err(e) = self.store.create(&view, input, options) {
+            let _ = self.store.remove(view.id);
+            return Err(SubmitError::Storage(e.to_string()));
+        }
+        let job = Job::new(view);
+        write(&self.jobs).insert(job.id, Arc::clone(&job));
+        queue.push_back(Arc::clone(&job));
+        drop(queue);
+        self.wake.notify_one();
+        Ok(job)
+    }
+
+    /// True when another job fits in the queue right now.
+    pub fn has_room(&self) -> bool {
+        lock(&self.queue).len() < self.cfg.max_queue
+    }
+
+    /// True once [`JobManager::shutdown`] was called.
+    pub fn is_shutting_down(&self) -> bool {
+        self.shutdown.load(Ordering::SeqCst)
+    }
+
+    /// The job with this id.
+    pub fn get(&self, id: Uuid) -> Option<Arc<Job>> {
+        read(&self.jobs).get(&id).cloned()
+    }
+
+    /// Every known job, oldest first.
+    pub fn list(&self) -> Vec<JobView> {
+        let mut v: Vec<JobView> = read(&self.jobs).values().map(|j| j.view()).collect();
+        v.sort_by_key(|j| (j.created_at, j.id));
+        v
+    }
+
+    /// Jobs waiting for a worker.
+    pub fn queued(&self) -> usize {
+        lock(&self.queue).len()
+    }
+
+    /// Cancels a queued or running job (a running one stops at its next progress poll).
+    /// Returns false when the job had already finished.
+    pub fn cancel(&self, job: &Arc<Job>) -> bool {
+        job.cancel.store(true, Ordering::SeqCst);
+        let mut queue = lock(&self.queue);
+        if let Some(pos) = queue.iter().position(|j| j.id == job.id) {
+            queue.remove(pos);
+            drop(queue);
+            self.finish(job, JobStatus::Cancelled, Some(cancelled_error()), None);
+            return true;
+        }
+        drop(queue);
+        !job.view().status.is_terminal()
+    }
+
+    /// Deletes a finished job and its files.
+    pub fn delete(&self, id: Uuid) -> std::io::Result<()> {
+        write(&self.jobs).remove(&id);
+        self.store.remove(id)
+    }
+
+    /// Deletes finished jobs older than `expire_after`; returns how many went.
+    pub fn expire(&self) -> usize {
+        let Some(age) = self.cfg.expire_after else {
+            return 0;
+        };
+        let cutoff = unix_now().saturating_sub(age.as_secs());
+        let old: Vec<Uuid> = read(&self.jobs)
+            .values()
+            .map(|j| j.view())
+            .filter(|v| v.status.is_terminal() && v.finished_at.is_some_and(|t| t <= cutoff))
+            .map(|v| v.id)
+            .collect();
+        for id in &old {
+            if let Err(e) = self.delete(*id) {
+                tracing::warn!(%id, error = %e, "cannot delete expired job");
+            }
+        }
+        if !old.is_empty() {
+            tracing::info!(expired = old.len(), "expired finished jobs");
+        }
+        old.len()
+    }
+
+    /// Stops accepting jobs, stops running ones (stored as `queued` again, so they run after a
+    /// restart) and joins the workers.
+    pub fn shutdown(&self) {
+        self.shutdown.store(true, Ordering::SeqCst);
+        self.wake.notify_all();
+        let handles = std::mem::take(&mut *lock(&self.workers));
+        for h in handles {
+            let _ = h.join();
+        }
+    }
+
+    fn worker_loop(&self) {
+        loop {
+            let job = {
+                let mut queue = lock(&self.queue);
+                loop {
+                    if self.shutdown.load(Ordering::SeqCst) {
+                        return;
+                    }
+                    if let Some(j) = queue.pop_front() {
+                        break j;
+                    }
+                    queue = self
+                        .wake
+                        .wait_timeout(queue, Duration::from_millis(500))
+                        .map_or_else(|e| e.into_inner().0, |r| r.0);
+                }
+            };
+            let run = std::panic::AssertUnwindSafe(|| self.run_job(&job));
+            if std::panic::catch_unwind(run).is_err() {
+                tracing::error!(id = %job.id, "worker panicked; job failed, worker continues");
+                let err = ErrorBody {
+                    code: "internal".into(),
+                    message: "internal error while reconstructing (a bug): please report it with the input".into(),
+                };
+                self.finish(&job, JobStatus::Failed, Some(err), None);
+            }
+        }
+    }
+
+    fn run_job(&self, job: &Arc<Job>) {
+        if job.cancel.load(Ordering::SeqCst) {
+            self.finish(job, JobStatus::Cancelled, Some(cancelled_error()), None);
+            return;
+        }
+        let started = Instant::now();
+        let deadline = now_ms() + self.cfg.job_timeout.as_millis() as u64;
+        job.deadline_ms.store(deadline.max(1), Ordering::Relaxed);
+        job.tx.send_modify(|v| {
+            v.status = JobStatus::Running;
+            v.started_at = Some(unix_now());
+        });
+        self.persist(job);
+        tracing::info!(id = %job.id, "job started");
+        let progress = JobProgress {
+            job,
+            shutdown: &self.shutdown,
+            last_percent: AtomicU64::new(0),
+        };
+        match self.reconstruct_job(job, &progress) {
+            Ok(triangles) => self.finish(job, JobStatus::Succeeded, None, Some(triangles)),
+            Err(JobError::Stopped)
+                if self.shutdown.load(Ordering::SeqCst) && !job.cancel.load(Ordering::SeqCst) =>
+            {
+                job.tx.send_modify(|v| {
+                    v.status = JobStatus::Queued;
+                    v.stage = None;
+                    v.progress = 0.0;
+                    v.stage_progress = 0.0;
+                    v.started_at = None;
+                });
+                self.persist(job);
+                tracing::info!(id = %job.id, "job stopped by shutdown; stored as queued");
+            }
+            Err(JobError::Stopped) if job.timed_out() && !job.cancel.load(Ordering::SeqCst) => {
+                let err = ErrorBody {
+                    code: "job_timeout".into(),
+                    message: format!(
+                        "the job exceeded the server's time limit of {} s; use fewer points, a smaller resolution, or ask for a longer --job-timeout-s",
+                        self.cfg.job_timeout.as_secs()
+                    ),
+                };
+                self.finish(job, JobStatus::Failed, Some(err), None);
+            }
+            Err(JobError::Stopped) => {
+                self.finish(job, JobStatus::Cancelled, Some(cancelled_error()), None)
+            }
+            Err(JobError::Failed(err)) => self.finish(job, JobStatus::Failed, Some(err), None),
+        }
+        tracing::info!(id = %job.id, status = ?job.view().status, secs = started.elapsed().as_secs_f64(), "job ended");
+    }
+
+    /// Reads the stored input, reconstructs, writes `mesh.glb` and `report.json`.
+    fn reconstruct_job(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
+        let view = job.view();
+        progress.stage("read");
+        let t = Instant::now();
+        let options = self
+            .store
+            .load_options(job.id)
+            .map_err(JobError::internal)?;
+        let params = ReconParams::try_from(&options)
+            .map_err(|e| JobError::Failed(ApiError::from(e).body))?;
+        let bytes = std::fs::read(self.store.file(job.id, &view.input.file))
+            .map_err(|e| JobError::internal(format!("stored input unreadable: {e}")))?;
+        let format = crate::io::PointFormat::from_path(std::path::Path::new(&view.input.file))
+            .ok_or_else(|| JobError::internal("stored input has an unknown extension"))?;
+        let limits = ReadLimits {
+            max_points: self.cfg.max_points,
+            max_bytes: self.cfg.max_upload_bytes,
+        };
+        let cloud = parse_point_cloud(&bytes, format, &limits)
+            .map_err(|e| JobError::Failed(ApiError::from(e).body))?;
+        drop(bytes);
+        let read_s = t.elapsed().as_secs_f64();
+        let mut rec = match crate::reconstruct(&cloud, &params, progress) {
+            Ok(r) => r,
+            // Stages report a stop through their own error types (e.g. a linalg `Cancelled`
+            // wrapped in `ReconError::Linalg`): when a stop was requested, that is the cause.
+            Err(crate::ReconError::Cancelled) => return Err(JobError::Stopped),
+            Err(_) if progress.cancelled() => return Err(JobError::Stopped),
+            Err(e) => {
+                return Err(JobError::Failed(ErrorBody {
+                    code: failure_code(&e).into(),
+                    message: e.to_string(),
+                }));
+            }
+        };
+        drop(cloud);
+        if progress.cancelled() {
+            return Err(JobError::Stopped);
+        }
+        progress.stage("write");
+        let t = Instant::now();
+        let glb = encode_glb(&rec.mesh).map_err(|e| JobError::internal(e.to_string()))?;
+        write_atomic(&self.store.file(job.id, "mesh.glb"), &glb)
+            .map_err(|e| JobError::internal(e.to_string()))?;
+        rec.report.timings_s.read = read_s;
+        rec.report.timings_s.write = t.elapsed().as_secs_f64();
+        rec.report.timings_s.total += read_s + rec.report.timings_s.write;
+        rec.report.memory.peak_rss_mib = crate::report::peak_rss_mib();
+        let json = serde_json::to_vec_pretty(&rec.report)
+            .map_err(|e| JobError::internal(e.to_string()))?;
+        write_atomic(&self.store.file(job.id, "report.json"), &json)
+            .map_err(|e| JobError::internal(e.to_string()))?;
+        progress.fraction(1.0);
+        Ok(rec.mesh.triangles.len())
+    }
+
+    /// Stores the terminal state first, then publishes it: whoever sees it (a `?wait`, a DELETE,
+    /// expiry) finds the files complete.
+    fn finish(
+        &self,
+        job: &Job,
+        status: JobStatus,
+        error: Option<ErrorBody>,
+        triangles: Option<usize>,
+    ) {
+        let mut v = job.view();
+        v.status = status;
+        v.finished_at = Some(unix_now());
+        v.error = error;
+        v.triangles = triangles;
+        if status == JobStatus::Succeeded {
+            v.progress = 1.0;
+            v.stage_progress = 1.0;
+        }
+        if let Err(e) = self.store.save_status(&v) {
+            tracing::error!(id = %job.id, error = %e, "cannot store job status");
+        }
+        job.tx.send_replace(v);
+    }
+
+    fn persist(&self, job: &Job) {
+        if let Err(e) = self.store.save_status(&job.view()) {
+            tracing::error!(id = %job.id, error = %e, "cannot store job status");
+        }
+    }
+}
+
+enum JobError {
+    /// Cancelled, timed out or shut down (decided by the caller from the flags).
+    Stopped,
+    /// Failed with this error.
+    Failed(ErrorBody),
+}
+
+impl JobError {
+    fn internal(message: impl Into<String>) -> JobError {
+        let message = message.into();
+        tracing::error!(%message, "job failed internally");
+        JobError::Failed(ErrorBody {
+            code: "internal".into(),
+            message,
+        })
+    }
+}
+
+/// Error code of a failed reconstruction: `unreconstructable` (the data), `system_too_large`
+/// (the parameters ask for more than the memory budget), `reconstruction_failed` (anything else).
+fn failure_code(e: &crate::ReconError) -> &'static str {
+    if e.is_input_problem() {
+        "unreconstructable"
+    } else if matches!(
+        e,
+        crate::ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
+    ) {
+        "system_too_large"
+    } else {
+        "reconstruction_failed"
+    }
+}
+
+fn cancelled_error() -> ErrorBody {
+    ErrorBody {
+        code: "cancelled".into(),
+        message: "cancelled by a DELETE request".into(),
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn read<T>(m: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
+    m.read().unwrap_or_else(|e| e.into_inner())
+}
+
+fn write<T>(m: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
+    m.write().unwrap_or_else(|e| e.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stage_weights_sum_to_one_and_progress_is_monotone() {
+        let total: f64 = STAGES.iter().map(|(_, w)| w).sum();
+        assert!((total - 1.0).abs() < 1e-12);
+        let mut last = 0.0;
+        for (s, _) in STAGES {
+            for f in [0.0, 0.5, 1.0] {
+                let p = overall(s, f).unwrap();
+                assert!(p >= last - 1e-12, "{s} {f}");
+                last = p;
+            }
+        }
+        assert!((last - 1.0).abs() < 1e-12);
+        assert_eq!(overall("nonsense", 0.5), None);
+    }
+}

@@ -1,0 +1,197 @@
+//! HTTP handlers: `reconstructions` (the job API) and `meta` (health, OpenAPI, viewer page), plus
+//! the helpers they share: bearer-token check, id parsing (ids are UUIDs; anything else is 404
+//! before any file-system access) and the query-string → [`ReconOptions`] mapping (the command
+//! line's names and validation, via serde).
+
+pub mod meta;
+pub mod reconstructions;
+
+use super::error::ApiError;
+use super::jobs::{Job, JobView};
+use crate::params::{ReconOptions, ReconParams};
+use axum::http::{HeaderMap, StatusCode, header};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use uuid::Uuid;
+
+/// A job as answered by the API: its state, the report once it succeeded, and links.
+#[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct JobResponse {
+    /// The job state.
+    #[serde(flatten)]
+    pub job: JobView,
+    /// URL of this job (poll it, or add `?wait=SECONDS`).
+    pub status_url: String,
+    /// URLs of the related resources.
+    pub links: JobLinks,
+    /// The reconstruction report (see the README's report contract) once the job succeeded.
+    #[schema(value_type = Option<Object>)]
+    pub report: Option<serde_json::Value>,
+}
+
+/// Related resources of a job.
+#[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct JobLinks {
+    /// Server-sent events with progress.
+    pub events: String,
+    /// The mesh as binary glTF (also `mesh.ply`, `mesh.obj`).
+    pub mesh: String,
+    /// The report JSON.
+    pub report: String,
+}
+
+/// `?wait=SECONDS` of the job endpoints.
+#[derive(Debug, Clone, Default, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct WaitQuery {
+    /// Hold the answer until the job finishes or this many seconds pass (capped by the server).
+    pub wait: Option<f64>,
+}
+
+/// Builds the API answer for `job`; `report` is read by the caller when the job succeeded.
+pub fn job_response(view: JobView, report: Option<serde_json::Value>) -> JobResponse {
+    let base = format!("/v1/reconstructions/{}", view.id);
+    JobResponse {
+        status_url: base.clone(),
+        links: JobLinks {
+            events: format!("{base}/events"),
+            mesh: format!("{base}/mesh.glb"),
+            report: format!("{base}/report"),
+        },
+        job: view,
+        report,
+    }
+}
+
+/// 401 unless the request carries `Authorization: Bearer <token>` (when a token is configured).
+pub fn authorize(token: Option<&str>, headers: &HeaderMap) -> Result<(), ApiError> {
+    let Some(token) = token else {
+        return Ok(());
+    };
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|s| s.strip_prefix("Bearer "))
+        .map(str::trim);
+    match given {
+        Some(g) if constant_time_eq(g.as_bytes(), token.as_bytes()) => Ok(()),
+        Some(_) => Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "the bearer token is wrong; send Authorization: Bearer <the server's --token>",
+        )),
+        None => Err(ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            "unauthorized",
+            "this server requires a token on POST and DELETE; send Authorization: Bearer <token>",
+        )),
+    }
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Parses a job id; anything but a UUID (path tricks included) is an unknown job.
+pub fn parse_id(raw: &str) -> Result<Uuid, ApiError> {
+    Uuid::parse_str(raw).map_err(|_| ApiError::not_found("job"))
+}
+
+/// Looks a job up by its raw path segment.
+pub fn find_job(st: &super::AppState, raw: &str) -> Result<Arc<Job>, ApiError> {
+    let id = parse_id(raw)?;
+    st.jobs.get(id).ok_or_else(|| ApiError::not_found("job"))
+}
+
+/// Name/value pairs of a query string or of multipart text fields.
+pub type Pairs = Vec<(String, String)>;
+
+/// Decodes a raw query string into pairs (400 on malformed encoding).
+pub fn query_pairs(raw: Option<&str>) -> Result<Pairs, ApiError> {
+    serde_urlencoded::from_str(raw.unwrap_or(""))
+        .map_err(|e| ApiError::bad_parameter(format!("malformed query string: {e}")))
+}
+
+/// Splits off `wait` and converts the remaining pairs into validated options and parameters.
+/// Same names, spellings and ranges as the command line; unknown names are refused.
+pub fn parse_params(
+    pairs: &[(String, String)],
+) -> Result<(ReconOptions, ReconParams, f64), ApiError> {
+    let mut wait = 0.0;
+    let mut rest: Vec<&(String, String)> = Vec::new();
+    for p in pairs {
+        if p.0 == "wait" {
+            wait =
+                p.1.parse::<f64>()
+                    .ok()
+                    .filter(|w| w.is_finite() && *w >= 0.0)
+                    .ok_or_else(|| {
+                        ApiError::bad_parameter(format!(
+                            "invalid parameter wait = {}: seconds, a number >= 0",
+                            p.1
+                        ))
+                    })?;
+        } else {
+            rest.push(p);
+        }
+    }
+    let encoded =
+        serde_urlencoded::to_string(&rest).map_err(|e| ApiError::bad_parameter(e.to_string()))?;
+    let options: ReconOptions = serde_urlencoded::from_str(&encoded).map_err(|e| {
+        ApiError::bad_parameter(format!(
+            "invalid parameters: {e} (names and values as on the command line, e.g. resolution=64&kernel=wendland-c2)"
+        ))
+    })?;
+    let params = ReconParams::try_from(&options)?;
+    Ok((options, params, wait))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pairs(q: &str) -> Pairs {
+        query_pairs(Some(q)).unwrap()
+    }
+
+    #[test]
+    fn query_maps_to_the_shared_options() {
+        let (o, p, w) = parse_params(&pairs("resolution=32&kernel=wendland-c4&wait=2.5")).unwrap();
+        assert_eq!(o.resolution, Some(32));
+        assert_eq!(p.resolution, Some(32));
+        assert_eq!(p.kernel, crate::rbf::Kernel::WendlandC4);
+        assert_eq!(w, 2.5);
+        for bad in [
+            "resolution=2",
+            "resolution=abc",
+            "kernel=gauss",
+            "bogus=1",
+            "wait=-1",
+            "wait=nan",
+            "support=0.1&support=0.2",
+            "support=-1",
+        ] {
+            let e = parse_params(&pairs(bad)).unwrap_err();
+            assert_eq!(e.status, StatusCode::BAD_REQUEST, "{bad}");
+            assert_eq!(e.body.code, "bad_parameter", "{bad}");
+        }
+    }
+
+    #[test]
+    fn ids_must_be_uuids_and_tokens_must_match() {
+        assert!(parse_id("../../etc/passwd").is_err());
+        assert!(parse_id("%2e%2e").is_err());
+        let id = Uuid::new_v4();
+        assert_eq!(parse_id(&id.to_string()).unwrap(), id);
+        let mut h = HeaderMap::new();
+        assert!(authorize(None, &h).is_ok());
+        assert_eq!(
+            authorize(Some("s3"), &h).unwrap_err().status,
+            StatusCode::UNAUTHORIZED
+        );
+        h.insert(header::AUTHORIZATION, "Bearer s4".parse().unwrap());
+        assert!(authorize(Some("s3"), &h).is_err());
+        h.insert(header::AUTHORIZATION, "Bearer s3".parse().unwrap());
+        assert!(authorize(Some("s3"), &h).is_ok());
+    }
+}
