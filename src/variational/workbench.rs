@@ -10,9 +10,7 @@ use super::ImplicitField;
 use super::constraints::{
     Offset, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
-use super::marching_squares::{
-    Grid2, MarchingParams, Polyline, contour_values, sample_grid_blocked,
-};
+use super::marching_squares::{Grid2, Polyline};
 use super::mls::{MlsBasis, MlsNormals, MlsParams, WeightPower, fit_mls};
 use super::quality::{CurveQuality, analyse, curvatures};
 use super::svg::{SvgInput, render};
@@ -229,13 +227,10 @@ pub fn grid_for(samples: &[Sample<2>], p: &CurveParams) -> Result<Grid2, Variati
     })
 }
 
-/// Contour a field over `grid`, skipping 8 × 8-cell blocks where the field proves its sign
-/// ([`ImplicitField::sign_on_ball`]).
+/// Contour a field over `grid`, evaluating only nodes near the zero set (blocks where the field
+/// proves its sign, [`ImplicitField::sign_on_ball`], are skipped; same curve as the full grid).
 pub fn contour_field(field: &dyn ImplicitField<2>, grid: &Grid2) -> Vec<Polyline> {
-    let f = |x: &[f64; 2]| field.value(x);
-    let test = |c: &[f64; 2], rho: f64| field.sign_on_ball(c, rho);
-    let values = sample_grid_blocked(&f, &test, grid, 8);
-    contour_values(&f, &values, grid, &MarchingParams::default())
+    super::adaptive::contour_adaptive(field, grid)
 }
 
 /// Fit, contour, analyse and draw.
