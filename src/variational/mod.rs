@@ -17,6 +17,7 @@ pub mod constraints;
 pub mod curve_io;
 pub mod datasets;
 pub mod dense;
+pub mod editing;
 pub mod field3d;
 pub mod incremental;
 pub mod kernel;
@@ -30,6 +31,7 @@ pub mod workbench;
 pub use constraints::{
     Offset, Origin, PointKind, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
+pub use editing::{IncrementalReport, run_workbench_incremental};
 pub use field3d::{
     MlsField3, VariationalField3, VariationalParams, fit_mls_3d, fit_variational_3d,
 };

@@ -102,6 +102,9 @@ pub struct CurveReport {
     pub quality: CurveQuality,
     /// Stage timings.
     pub timings_s: CurveTimings,
+    /// Incremental update diagnostics (`rbfsurf curve --add`), absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incremental: Option<super::editing::IncrementalReport>,
 }
 
 /// Everything a run produces.
@@ -247,6 +250,16 @@ pub fn run_workbench(
 ) -> Result<WorkbenchOutput, VariationalError> {
     let t0 = Instant::now();
     let fitted = fit_curve(samples, p)?;
+    finish_workbench(samples, fitted, p, t0.elapsed().as_secs_f64())
+}
+
+/// Contour, analyse and draw an already fitted field (`fit_s`: the fit time to report).
+pub fn finish_workbench(
+    samples: &[Sample<2>],
+    fitted: FittedCurve,
+    p: &CurveParams,
+    fit_s: f64,
+) -> Result<WorkbenchOutput, VariationalError> {
     let t1 = Instant::now();
     let grid = grid_for(samples, p)?;
     let field = |x: &[f64; 2]| fitted.field.value(x);
@@ -270,7 +283,7 @@ pub fn run_workbench(
         title: &title,
     });
     let timings_s = CurveTimings {
-        fit: (t1 - t0).as_secs_f64(),
+        fit: fit_s,
         contour: (t2 - t1).as_secs_f64(),
         analyse: t2.elapsed().as_secs_f64(),
     };
@@ -281,6 +294,7 @@ pub fn run_workbench(
         grid,
         quality,
         timings_s,
+        incremental: None,
     };
     Ok(WorkbenchOutput { svg, report, lines })
 }
