@@ -65,16 +65,38 @@ pub struct CurveArgs {
     pub add: Option<PathBuf>,
 }
 
-fn read_samples(path: &std::path::Path) -> anyhow::Result<Vec<crate::variational::Sample<2>>> {
+fn read_samples(path: &std::path::Path) -> anyhow::Result<Lines> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    curve_io::parse_curve(&text).with_context(|| format!("in {}", path.display()))
+    curve_io::parse_curve_lines(&text).with_context(|| format!("in {}", path.display()))
+}
+
+/// Samples of a curve file with the 1-based file line of each.
+type Lines = (Vec<crate::variational::Sample<2>>, Vec<usize>);
+
+/// Name the file lines of the rows an error mentions.
+fn with_lines(
+    e: crate::variational::VariationalError,
+    path: &std::path::Path,
+    lines: &[usize],
+) -> anyhow::Error {
+    let named: Vec<String> = e
+        .rows()
+        .iter()
+        .filter_map(|&r| lines.get(r).map(|l| format!("row {r} = line {l}")))
+        .collect();
+    let msg = if named.is_empty() {
+        format!("in {}", path.display())
+    } else {
+        format!("in {} ({})", path.display(), named.join(", "))
+    };
+    anyhow::Error::new(e).context(msg)
 }
 
 /// Run the workbench and write the SVG (and report) atomically.
 pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
-    let samples = match (&a.dataset, &a.input) {
-        (Some(name), None) => datasets::by_name(name)?,
+    let (samples, lines) = match (&a.dataset, &a.input) {
+        (Some(name), None) => (datasets::by_name(name)?, Vec::new()),
         (None, Some(path)) => read_samples(path)?,
         _ => anyhow::bail!("give either an input file or --dataset NAME (not both)"),
     };
@@ -97,9 +119,12 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let out = match &a.add {
-        None => run_workbench(&samples, &params)?,
+        None => run_workbench(&samples, &params).map_err(|e| match &a.input {
+            Some(p) => with_lines(e, p, &lines),
+            None => e.into(),
+        })?,
         Some(path) => {
-            let extra = read_samples(path)?;
+            let (extra, _) = read_samples(path)?;
             run_workbench_incremental(&samples, &extra, &params)
                 .with_context(|| format!("adding the constraints of {}", path.display()))?
         }
@@ -163,6 +188,28 @@ mod tests {
                 .to_string()
                 .contains("unknown data set")
         );
+    }
+
+    #[test]
+    fn errors_name_file_lines() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("bad.txt");
+        // Data rows 0..3; row 3 (file line 6) has a NaN.
+        std::fs::write(&input, "# header\n0 0\n\n1 0\n1 1\nnan 1\n").unwrap();
+        let a = CurveArgs {
+            input: Some(input),
+            output: dir.path().join("b.svg"),
+            method: MethodArg::TurkObrien,
+            grid: 40,
+            epsilon: 0.0,
+            offset: 0.1,
+            margin: 0.25,
+            report: None,
+            dataset: None,
+            add: None,
+        };
+        let msg = format!("{:#}", run(&a).unwrap_err());
+        assert!(msg.contains("row 3 = line 6"), "{msg}");
     }
 
     #[test]
