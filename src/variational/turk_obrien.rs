@@ -159,11 +159,15 @@ impl<const D: usize> ImplicitField<D> for TurkObrienFit<D> {
             return BallSign::Hopeless;
         }
         let u = self.frame.forward(x);
-        let f = self.value_normalized(&u);
         let e = &self.parts[0];
         let r = rho / self.frame.scale;
-        // The remainder alone (a cheap pass, no logarithms) often already rules the ball out.
+        // The remainder alone (a cheap pass, no logarithms) often already rules the ball out:
+        // infinite when the ball holds a centre (thin plate), then `f` is not even needed.
         let rem = e.remainder_bound(&u, r);
+        if !rem.is_finite() {
+            return BallSign::Unknown;
+        }
+        let f = self.value_normalized(&u);
         if f.abs() <= rem {
             return if rem.is_finite() && rem * (rho_min / rho).powi(3) > 4.0 * f.abs() {
                 BallSign::Hopeless
