@@ -22,7 +22,23 @@ fn turk_obrien_k4(c: &mut Criterion) {
         },
     )
     .unwrap();
+    let t0 = std::time::Instant::now();
     let fit = fit_turk_obrien(&s, &TurkObrienParams::default()).unwrap();
+    let t1 = std::time::Instant::now();
+    let a = rbfsurf::variational::adaptive::sample_grid_adaptive(&fit, &grid, 16, 2);
+    let t2 = std::time::Instant::now();
+    let lines = contour_field(&fit, &grid);
+    eprintln!(
+        "K4 one run: fit {:.1} ms, adaptive sampling {:.1} ms ({} of {} nodes evaluated, {} tests), \
+         sampling + contour {:.1} ms, {} polylines",
+        (t1 - t0).as_secs_f64() * 1e3,
+        (t2 - t1).as_secs_f64() * 1e3,
+        a.evaluated,
+        (grid.nx + 1) * (grid.ny + 1),
+        a.tests,
+        t2.elapsed().as_secs_f64() * 1e3,
+        lines.len()
+    );
     eprintln!(
         "K4: {} unknowns, rcond {:.2e}, grid {}x{}",
         fit.info.unknowns, fit.info.rcond, grid.nx, grid.ny
@@ -42,7 +58,7 @@ fn turk_obrien_k4(c: &mut Criterion) {
             )
         })
     });
-    g.bench_function("fit+contour200_blocked", |b| {
+    g.bench_function("fit+contour200_adaptive", |b| {
         b.iter(|| {
             let fit = fit_turk_obrien(black_box(&s), &TurkObrienParams::default()).unwrap();
             contour_field(&fit, &grid)

@@ -10,7 +10,7 @@ use crate::progress::Progress;
 
 use crate::variational::{
     CurveMethod, CurveParams, MlpParams, Offset, WeightPower, curve_io, datasets,
-    workbench::run_workbench_with_progress,
+    run_workbench_incremental, workbench::run_workbench_with_progress,
 };
 
 /// A progress bar over training epochs (indicatif on stderr; hidden when `quiet` or when stderr
@@ -175,17 +175,46 @@ pub struct CurveArgs {
     /// MLP options.
     #[command(flatten)]
     pub mlp: MlpArgs,
+    /// Add the constraints of this second file (same format) to the solved system by a
+    /// Schur-complement update instead of refitting (turk-obrien only); the report's
+    /// `incremental` object gives the update time, a fresh solve's time and their difference.
+    #[arg(long)]
+    pub add: Option<PathBuf>,
+}
+
+fn read_samples(path: &std::path::Path) -> anyhow::Result<Lines> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    curve_io::parse_curve_lines(&text).with_context(|| format!("in {}", path.display()))
+}
+
+/// Samples of a curve file with the 1-based file line of each.
+type Lines = (Vec<crate::variational::Sample<2>>, Vec<usize>);
+
+/// Name the file lines of the rows an error mentions.
+fn with_lines(
+    e: crate::variational::VariationalError,
+    path: &std::path::Path,
+    lines: &[usize],
+) -> anyhow::Error {
+    let named: Vec<String> = e
+        .rows()
+        .iter()
+        .filter_map(|&r| lines.get(r).map(|l| format!("row {r} = line {l}")))
+        .collect();
+    let msg = if named.is_empty() {
+        format!("in {}", path.display())
+    } else {
+        format!("in {} ({})", path.display(), named.join(", "))
+    };
+    anyhow::Error::new(e).context(msg)
 }
 
 /// Run the workbench and write the SVG (and report) atomically.
 pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
-    let samples = match (&a.dataset, &a.input) {
-        (Some(name), None) => datasets::by_name(name)?,
-        (None, Some(path)) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read {}", path.display()))?;
-            curve_io::parse_curve(&text).with_context(|| format!("in {}", path.display()))?
-        }
+    let (samples, lines) = match (&a.dataset, &a.input) {
+        (Some(name), None) => (datasets::by_name(name)?, Vec::new()),
+        (None, Some(path)) => read_samples(path)?,
         _ => anyhow::bail!("give either an input file or --dataset NAME (not both)"),
     };
     let method = match a.method {
@@ -211,10 +240,22 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
         mlp: a.mlp.params(),
         ..Default::default()
     };
-    let bar = EpochBar::new(a.mlp.quiet || params.method.mlp_smoothing().is_none());
-    let out = run_workbench_with_progress(&samples, &params, &bar);
-    bar.finish();
-    let out = out?;
+    let out = match &a.add {
+        None => {
+            let bar = EpochBar::new(a.mlp.quiet || params.method.mlp_smoothing().is_none());
+            let out = run_workbench_with_progress(&samples, &params, &bar);
+            bar.finish();
+            out.map_err(|e| match &a.input {
+                Some(p) => with_lines(e, p, &lines),
+                None => e.into(),
+            })?
+        }
+        Some(path) => {
+            let (extra, _) = read_samples(path)?;
+            run_workbench_incremental(&samples, &extra, &params)
+                .with_context(|| format!("adding the constraints of {}", path.display()))?
+        }
+    };
     write_atomic(&a.output, out.svg.as_bytes())?;
     if let Some(r) = &a.report {
         write_atomic(r, serde_json::to_string_pretty(&out.report)?.as_bytes())?;
@@ -239,6 +280,23 @@ fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
+    fn mlp_defaults() -> MlpArgs {
+        MlpArgs {
+            lambda: 0.05,
+            aux_points: 250,
+            epochs: 3000,
+            hidden: 32,
+            layers: 2,
+            lr: 1e-2,
+            dropout: 0.1,
+            input_gain: 1.0,
+            target_peak: 1.0,
+            plateau_window: 250,
+            seed: 1,
+            quiet: true,
+        }
+    }
+
     #[test]
     fn dataset_to_svg_and_report() {
         let dir = tempfile::tempdir().unwrap();
@@ -252,20 +310,8 @@ mod tests {
             margin: 0.25,
             report: Some(dir.path().join("k.json")),
             dataset: Some("koch1".into()),
-            mlp: MlpArgs {
-                lambda: 0.05,
-                aux_points: 250,
-                epochs: 3000,
-                hidden: 32,
-                layers: 2,
-                lr: 1e-2,
-                dropout: 0.1,
-                input_gain: 1.0,
-                target_peak: 1.0,
-                plateau_window: 250,
-                seed: 1,
-                quiet: true,
-            },
+            mlp: mlp_defaults(),
+            add: None,
         };
         run(&a).unwrap();
         assert!(
@@ -313,5 +359,72 @@ mod tests {
                 .to_string()
                 .contains("unknown data set")
         );
+    }
+
+    #[test]
+    fn errors_name_file_lines() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("bad.txt");
+        // Data rows 0..3; row 3 (file line 6) has a NaN.
+        std::fs::write(&input, "# header\n0 0\n\n1 0\n1 1\nnan 1\n").unwrap();
+        let a = CurveArgs {
+            input: Some(input),
+            output: dir.path().join("b.svg"),
+            method: MethodArg::TurkObrien,
+            grid: 40,
+            epsilon: 0.0,
+            offset: 0.1,
+            margin: 0.25,
+            report: None,
+            dataset: None,
+            add: None,
+            mlp: mlp_defaults(),
+        };
+        let msg = format!("{:#}", run(&a).unwrap_err());
+        assert!(msg.contains("row 3 = line 6"), "{msg}");
+    }
+
+    #[test]
+    fn add_updates_incrementally_and_reports() {
+        let dir = tempfile::tempdir().unwrap();
+        let (base, extra) = (dir.path().join("base.txt"), dir.path().join("extra.txt"));
+        let ring = |n: usize, r: f64, phase: f64| {
+            (0..n)
+                .map(|k| {
+                    let t = phase + k as f64 * std::f64::consts::TAU / n as f64;
+                    format!("{} {} {} {}\n", r * t.cos(), r * t.sin(), t.cos(), t.sin())
+                })
+                .collect::<String>()
+        };
+        std::fs::write(&base, ring(24, 1.0, 0.0)).unwrap();
+        std::fs::write(&extra, ring(2, 1.1, 0.5)).unwrap();
+        let a = CurveArgs {
+            input: Some(base),
+            output: dir.path().join("e.svg"),
+            method: MethodArg::TurkObrien,
+            grid: 60,
+            epsilon: 0.0,
+            offset: 0.1,
+            margin: 0.25,
+            report: Some(dir.path().join("e.json")),
+            dataset: None,
+            add: Some(extra),
+            mlp: mlp_defaults(),
+        };
+        run(&a).unwrap();
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("e.json")).unwrap())
+                .unwrap();
+        let inc = &j["incremental"];
+        assert_eq!(inc["added_samples"], 2);
+        assert!(inc["max_coefficient_difference_rel"].as_f64().unwrap() <= 1e-9);
+        assert!(inc["update_s"].as_f64().unwrap() >= 0.0);
+        assert!(inc["fresh_solve_s"].as_f64().unwrap() > 0.0);
+        assert_eq!(j["samples"], 26);
+        let shen = CurveArgs {
+            method: MethodArg::ShenLinear,
+            ..a
+        };
+        assert!(format!("{:#}", run(&shen).unwrap_err()).contains("turk-obrien"));
     }
 }

@@ -162,6 +162,25 @@ pub enum VariationalError {
     },
 }
 
+impl VariationalError {
+    /// The 0-based sample rows the error names (empty when it names none); a front end maps them
+    /// to file lines.
+    pub fn rows(&self) -> Vec<usize> {
+        use VariationalError as E;
+        match self {
+            E::NonFinite { row, .. } | E::ZeroNormal { row, .. } | E::MissingNormal { row, .. } => {
+                vec![*row]
+            }
+            E::ConflictingValues { first, second, .. } | E::DuplicatePoint { first, second } => {
+                vec![*first, *second]
+            }
+            E::OffsetCollision { row, other } => vec![*row, *other],
+            E::Degenerate { rows, .. } => rows.clone(),
+            _ => Vec::new(),
+        }
+    }
+}
+
 /// One user constraint in `D` dimensions.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample<const D: usize> {

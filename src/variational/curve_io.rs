@@ -12,7 +12,8 @@
 //!
 //! Blank lines are ignored. Numbers are Rust `f64` syntax (`1e-3`, `-0.5`, `inf` is rejected by
 //! validation later). Rows in later errors are the 0-based data lines (comments and blank lines
-//! excluded); parse errors give the 1-based file line. `O(file size)`.
+//! excluded; [`parse_curve_lines`] maps them to file lines); parse errors give the 1-based file
+//! line. `O(file size)`.
 
 use super::constraints::{Sample, VariationalError};
 
@@ -26,7 +27,14 @@ use super::constraints::{Sample, VariationalError};
 /// assert_eq!(s[1].normal, Some([1.0, -1.0]));
 /// ```
 pub fn parse_curve(text: &str) -> Result<Vec<Sample<2>>, VariationalError> {
+    parse_curve_lines(text).map(|(s, _)| s)
+}
+
+/// [`parse_curve`] that also returns the 1-based file line of every sample, so that errors
+/// naming sample rows ([`VariationalError::rows`]) can be reported as file lines.
+pub fn parse_curve_lines(text: &str) -> Result<(Vec<Sample<2>>, Vec<usize>), VariationalError> {
     let mut out = Vec::new();
+    let mut lines = Vec::new();
     for (k, raw) in text.lines().enumerate() {
         let line = raw.split('#').next().unwrap_or("");
         let toks: Vec<&str> = line
@@ -77,6 +85,7 @@ pub fn parse_curve(text: &str) -> Result<Vec<Sample<2>>, VariationalError> {
             }
         };
         out.push(s);
+        lines.push(k + 1);
     }
     if out.is_empty() {
         return Err(VariationalError::Parse {
@@ -84,7 +93,7 @@ pub fn parse_curve(text: &str) -> Result<Vec<Sample<2>>, VariationalError> {
             message: "no data lines".into(),
         });
     }
-    Ok(out)
+    Ok((out, lines))
 }
 
 /// Write samples in the same format (round-trips through [`parse_curve`] exactly).

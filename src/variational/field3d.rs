@@ -112,6 +112,11 @@ impl ScalarField for VariationalField3 {
         ImplicitField::gradient(&self.fit, p)
     }
 
+    /// Vectorised batch ([`crate::variational::batch`]), same values as [`ScalarField::value`].
+    fn values_in(&self, _region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        ImplicitField::values(&self.fit, points, out);
+    }
+
     fn may_contain_zero(&self, cell: &Aabb) -> bool {
         let (c, rho) = ball(cell);
         let u = self.fit.frame.forward(&c);

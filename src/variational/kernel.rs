@@ -21,13 +21,7 @@ impl RadialKernel {
     #[inline]
     pub fn phi_r2(self, r2: f64) -> f64 {
         match self {
-            RadialKernel::ThinPlate => {
-                if r2 > 0.0 {
-                    0.5 * r2 * r2.ln()
-                } else {
-                    0.0
-                }
-            }
+            RadialKernel::ThinPlate => super::batch::thin_plate_r2(r2),
             RadialKernel::Cubic => r2 * r2.sqrt(),
         }
     }
@@ -39,7 +33,7 @@ impl RadialKernel {
             return 0.0;
         }
         match self {
-            RadialKernel::ThinPlate => r2.ln() + 1.0,
+            RadialKernel::ThinPlate => super::batch::fast_ln(r2.max(1e-300)) + 1.0,
             RadialKernel::Cubic => 3.0 * r2.sqrt(),
         }
     }
@@ -172,6 +166,16 @@ impl<const D: usize> RbfExpansion<D> {
     /// [`RadialKernel::third_derivative_bound`] / [`RadialKernel::fourth_derivative_bound`].
     /// `O(n)`; infinite when the ball holds a centre whose kernel is not smooth enough there.
     pub fn variation_bound(&self, u: &[f64; D], rho: f64) -> f64 {
+        let g = self.gradient(u);
+        let h = self.hessian(u);
+        let gn = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let hn = h.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+        gn * rho + 0.5 * hn * rho * rho + self.remainder_bound(u, rho)
+    }
+
+    /// The third-order Taylor remainder term of [`RbfExpansion::variation_bound`],
+    /// `ρ³/6 · Σ_j (|α_j| ‖D³φ‖ + |β_j| ‖D⁴φ‖)` on the ball; `O(n)` without logarithms.
+    pub fn remainder_bound(&self, u: &[f64; D], rho: f64) -> f64 {
         let mut rem = 0.0;
         for (j, c) in self.centres.iter().enumerate() {
             let r = (0..D).map(|k| (u[k] - c[k]).powi(2)).sum::<f64>().sqrt();
@@ -186,11 +190,7 @@ impl<const D: usize> RbfExpansion<D> {
                 }
             }
         }
-        let g = self.gradient(u);
-        let h = self.hessian(u);
-        let gn = g.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let hn = h.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-        gn * rho + 0.5 * hn * rho * rho + rem * rho.powi(3) / 6.0
+        rem * rho.powi(3) / 6.0
     }
 }
 

@@ -12,6 +12,9 @@
 
 use rayon::prelude::*;
 
+/// A batch evaluator: `batch(xs, out)` sets `out[i] = f(xs[i])` (input units).
+pub type BatchEval<'a> = dyn Fn(&[[f64; 2]], &mut [f64]) + Sync + 'a;
+
 /// The sampling rectangle and its resolution.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Grid2 {
@@ -154,19 +157,34 @@ pub fn contour_values(
     grid: &Grid2,
     params: &MarchingParams,
 ) -> Vec<Polyline> {
-    let segs = segments(field, values, grid);
-    let mut crossing = std::collections::HashMap::new();
-    for &(a, b) in &segs {
-        for e in [a, b] {
-            crossing
-                .entry(e)
-                .or_insert_with(|| edge_point(field, values, grid, e, params.refine_steps));
+    let batch = |xs: &[[f64; 2]], out: &mut [f64]| {
+        for (o, x) in out.iter_mut().zip(xs) {
+            *o = field(x);
         }
-    }
+    };
+    contour_values_batch(field, &batch, values, grid, params)
+}
+
+/// [`contour_values`] with a batch evaluator for the crossing refinement: all crossings take
+/// their regula-falsi steps in lockstep, each step one parallel batch call (`batch(xs, out)`
+/// must give the same values as `field`). Same output as [`contour_values`].
+pub fn contour_values_batch(
+    field: &(dyn Fn(&[f64; 2]) -> f64 + Sync),
+    batch: &BatchEval,
+    values: &[f64],
+    grid: &Grid2,
+    params: &MarchingParams,
+) -> Vec<Polyline> {
+    let segs = segments(field, values, grid);
+    let mut edges: Vec<usize> = segs.iter().flat_map(|&(a, b)| [a, b]).collect();
+    edges.sort_unstable();
+    edges.dedup();
+    let points = edge_points(batch, values, grid, &edges, params.refine_steps);
+    let at = |e: &usize| points[edges.binary_search(e).unwrap_or(0)];
     chain(&segs)
         .into_iter()
-        .map(|(edges, closed)| Polyline {
-            points: edges.iter().map(|e| crossing[e]).collect(),
+        .map(|(es, closed)| Polyline {
+            points: es.iter().map(at).collect(),
             closed,
         })
         .collect()
@@ -246,47 +264,94 @@ fn segments(
         .collect()
 }
 
-/// The zero crossing on edge `e`, refined along the edge.
-fn edge_point(
-    field: &(dyn Fn(&[f64; 2]) -> f64 + Sync),
-    values: &[f64],
-    grid: &Grid2,
-    e: usize,
-    steps: usize,
-) -> [f64; 2] {
-    let w = grid.nx + 1;
-    let ((ia, ja), (ib, jb)) = edge_nodes(grid, e);
-    let (pa, pb) = (grid.node(ia, ja), grid.node(ib, jb));
-    let (mut fa, mut fb) = (values[ja * w + ia], values[jb * w + ib]);
-    let at = |t: f64| [pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1])];
-    let (mut ta, mut tb) = (0.0, 1.0);
-    let mut side = 0i8;
-    let mut t = if fa == fb { 0.5 } else { fa / (fa - fb) };
-    for _ in 0..steps {
-        let ft = field(&at(t));
+/// Regula-falsi state of one edge crossing (Illinois variant).
+#[derive(Clone, Copy)]
+struct Falsi {
+    pa: [f64; 2],
+    pb: [f64; 2],
+    ta: f64,
+    tb: f64,
+    fa: f64,
+    fb: f64,
+    side: i8,
+    t: f64,
+    done: bool,
+}
+
+impl Falsi {
+    fn at(&self, t: f64) -> [f64; 2] {
+        let (pa, pb) = (self.pa, self.pb);
+        [pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1])]
+    }
+
+    fn step(&mut self, ft: f64) {
         if ft == 0.0 || !ft.is_finite() {
-            break;
+            self.done = true;
+            return;
         }
-        if (ft < 0.0) == (fa < 0.0) {
-            (ta, fa) = (t, ft);
-            if side == -1 {
-                fb *= 0.5;
+        if (ft < 0.0) == (self.fa < 0.0) {
+            (self.ta, self.fa) = (self.t, ft);
+            if self.side == -1 {
+                self.fb *= 0.5;
             }
-            side = -1;
+            self.side = -1;
         } else {
-            (tb, fb) = (t, ft);
-            if side == 1 {
-                fa *= 0.5;
+            (self.tb, self.fb) = (self.t, ft);
+            if self.side == 1 {
+                self.fa *= 0.5;
             }
-            side = 1;
+            self.side = 1;
         }
-        t = if fa == fb {
-            0.5 * (ta + tb)
+        self.t = if self.fa == self.fb {
+            0.5 * (self.ta + self.tb)
         } else {
-            ta + (tb - ta) * fa / (fa - fb)
+            self.ta + (self.tb - self.ta) * self.fa / (self.fa - self.fb)
         };
     }
-    at(t.clamp(0.0, 1.0))
+}
+
+/// The zero crossings on `edges`, refined along each edge in lockstep.
+fn edge_points(
+    batch: &BatchEval,
+    values: &[f64],
+    grid: &Grid2,
+    edges: &[usize],
+    steps: usize,
+) -> Vec<[f64; 2]> {
+    let w = grid.nx + 1;
+    let mut st: Vec<Falsi> = edges
+        .iter()
+        .map(|&e| {
+            let ((ia, ja), (ib, jb)) = edge_nodes(grid, e);
+            let (fa, fb) = (values[ja * w + ia], values[jb * w + ib]);
+            Falsi {
+                pa: grid.node(ia, ja),
+                pb: grid.node(ib, jb),
+                ta: 0.0,
+                tb: 1.0,
+                fa,
+                fb,
+                side: 0,
+                t: if fa == fb { 0.5 } else { fa / (fa - fb) },
+                done: false,
+            }
+        })
+        .collect();
+    for _ in 0..steps {
+        let active: Vec<usize> = (0..st.len()).filter(|&k| !st[k].done).collect();
+        if active.is_empty() {
+            break;
+        }
+        let xs: Vec<[f64; 2]> = active.iter().map(|&k| st[k].at(st[k].t)).collect();
+        let mut fs = vec![0.0; xs.len()];
+        xs.par_chunks(64)
+            .zip(fs.par_chunks_mut(64))
+            .for_each(|(x, f)| batch(x, f));
+        for (&k, &f) in active.iter().zip(&fs) {
+            st[k].step(f);
+        }
+    }
+    st.iter().map(|s| s.at(s.t.clamp(0.0, 1.0))).collect()
 }
 
 /// Chain segments into polylines of edge ids; returns `(edges, closed)`.

@@ -11,10 +11,13 @@
 //! Every fit works in normalised coordinates ([`Frame`]: bounding-box centre at the origin,
 //! longest edge 1) and evaluates in the caller's units. Sign convention: `f < 0` inside.
 
+pub mod adaptive;
+pub mod batch;
 pub mod constraints;
 pub mod curve_io;
 pub mod datasets;
 pub mod dense;
+pub mod editing;
 pub mod field3d;
 pub mod incremental;
 pub mod kernel;
@@ -29,6 +32,7 @@ pub mod workbench;
 pub use constraints::{
     Offset, Origin, PointKind, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
+pub use editing::{IncrementalReport, run_workbench_incremental};
 pub use field3d::{
     MlsField3, VariationalField3, VariationalParams, fit_mls_3d, fit_variational_3d,
 };
@@ -50,6 +54,34 @@ pub trait ImplicitField<const D: usize>: Sync {
     fn sign_on_ball(&self, _x: &[f64; D], _rho: f64) -> Option<f64> {
         None
     }
+    /// Like [`ImplicitField::sign_on_ball`], but may also say that smaller balls around `x`,
+    /// down to radius `rho_min`, are not worth testing ([`BallSign::Hopeless`], a cost hint only;
+    /// the default never says so).
+    fn ball_sign(&self, x: &[f64; D], rho: f64, _rho_min: f64) -> BallSign {
+        match self.sign_on_ball(x, rho) {
+            Some(f) => BallSign::Proven(f),
+            None => BallSign::Unknown,
+        }
+    }
+    /// `out[i] = f(xs[i])` for many points (default: one [`ImplicitField::value`] call each;
+    /// fields with a vectorised path override it and must return the same values).
+    fn values(&self, xs: &[[f64; D]], out: &mut [f64]) {
+        for (o, x) in out.iter_mut().zip(xs) {
+            *o = self.value(x);
+        }
+    }
+}
+
+/// Outcome of a sign test on a ball ([`ImplicitField::ball_sign`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BallSign {
+    /// `f` keeps the sign of this value (`f` at the centre) on the ball.
+    Proven(f64),
+    /// No proof; a smaller ball may succeed.
+    Unknown,
+    /// No proof, and the bound is so loose that balls down to the smallest tested radius will
+    /// not succeed either: do not split.
+    Hopeless,
 }
 
 /// Similarity map to normalised coordinates: `u = (x − centre) / scale`.

@@ -25,7 +25,7 @@ use super::constraints::{
 };
 use super::dense::{SymmetricSolver, lower_from_fn};
 use super::kernel::{RadialKernel, RbfExpansion};
-use super::{Frame, ImplicitField};
+use super::{BallSign, Frame, ImplicitField};
 
 /// How the normals of the samples are used.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,6 +95,21 @@ impl<const D: usize> TurkObrienFit<D> {
         s
     }
 
+    /// `out[i] = f(us[i])` at normalised points, vectorised; same bits as
+    /// [`TurkObrienFit::value_normalized`]. Single-threaded.
+    pub fn values_normalized(&self, us: &[[f64; D]], out: &mut [f64]) {
+        self.parts[0].values_into(us, out);
+        if self.parts.len() > 1 {
+            let mut tmp = vec![0.0; us.len()];
+            for (k, part) in self.parts.iter().skip(1).enumerate() {
+                part.values_into(us, &mut tmp);
+                for ((o, t), u) in out.iter_mut().zip(&tmp).zip(us) {
+                    *o += t * u[k];
+                }
+            }
+        }
+    }
+
     /// `∇f` at a normalised point (normalised units).
     pub fn gradient_normalized(&self, u: &[f64; D]) -> [f64; D] {
         let mut g = self.parts[0].gradient(u);
@@ -126,6 +141,54 @@ impl<const D: usize> ImplicitField<D> for TurkObrienFit<D> {
     fn gradient(&self, x: &[f64; D]) -> [f64; D] {
         self.gradient_normalized(&self.frame.forward(x))
             .map(|g| g / self.frame.scale)
+    }
+
+    /// `Some(f(x))` when `|f(x)|` exceeds the variation bound on the ball plus a rounding margin
+    /// (`4 (n + D + 2) ε Σ|terms|`), so every evaluated point of the ball has the sign of `f(x)`.
+    fn sign_on_ball(&self, x: &[f64; D], rho: f64) -> Option<f64> {
+        match self.ball_sign(x, rho, rho) {
+            BallSign::Proven(f) => Some(f),
+            _ => None,
+        }
+    }
+
+    /// Hopeless when the (finite) `ρ³` remainder, scaled to `rho_min`, still exceeds `4 |f(x)|` (it
+    /// shrinks at least like `ρ³`).
+    fn ball_sign(&self, x: &[f64; D], rho: f64, rho_min: f64) -> BallSign {
+        if self.parts.len() > 1 {
+            return BallSign::Hopeless;
+        }
+        let u = self.frame.forward(x);
+        let e = &self.parts[0];
+        let r = rho / self.frame.scale;
+        // The remainder alone (a cheap pass, no logarithms) often already rules the ball out:
+        // infinite when the ball holds a centre (thin plate), then `f` is not even needed.
+        let rem = e.remainder_bound(&u, r);
+        if !rem.is_finite() {
+            return BallSign::Unknown;
+        }
+        let f = self.value_normalized(&u);
+        if f.abs() <= rem {
+            return if rem.is_finite() && rem * (rho_min / rho).powi(3) > 4.0 * f.abs() {
+                BallSign::Hopeless
+            } else {
+                BallSign::Unknown
+            };
+        }
+        let bound = e.variation_bound(&u, r);
+        let n = (e.centres.len() + D + 2) as f64;
+        let margin = 4.0 * n * f64::EPSILON * e.abs_term_sum(&u);
+        if f.abs() > bound + margin {
+            BallSign::Proven(f)
+        } else {
+            BallSign::Unknown
+        }
+    }
+
+    /// Vectorised ([`RbfExpansion::values_into`]), same bits as [`ImplicitField::value`].
+    fn values(&self, xs: &[[f64; D]], out: &mut [f64]) {
+        let us: Vec<[f64; D]> = xs.iter().map(|x| self.frame.forward(x)).collect();
+        self.values_normalized(&us, out);
     }
 }
 
@@ -190,11 +253,22 @@ pub fn fit_turk_obrien<const D: usize>(
         info,
         constraints,
     };
-    fit.info.max_residual = fit
-        .constraints
-        .iter()
-        .map(|c| (fit.value_normalized(&c.p) - c.value).abs())
-        .fold(0.0, f64::max);
+    fit.info.max_residual = {
+        use rayon::prelude::*;
+        let f = &fit;
+        f.constraints
+            .par_chunks(256)
+            .map(|cs| {
+                let us: Vec<[f64; D]> = cs.iter().map(|c| c.p).collect();
+                let mut v = vec![0.0; us.len()];
+                f.values_normalized(&us, &mut v);
+                cs.iter()
+                    .zip(v)
+                    .map(|(c, v)| (v - c.value).abs())
+                    .fold(0.0, f64::max)
+            })
+            .reduce(|| 0.0, f64::max)
+    };
     for c in &mut fit.constraints {
         c.p = frame.inverse(&c.p);
     }

@@ -12,9 +12,7 @@ use super::ImplicitField;
 use super::constraints::{
     Offset, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
-use super::marching_squares::{
-    Grid2, MarchingParams, Polyline, contour_values, sample_grid_blocked,
-};
+use super::marching_squares::{Grid2, Polyline};
 use super::mlp::{MlpParams, Smoothing, TrainingInfo, fit_mlp, pseudo_points};
 use super::mls::{MlsBasis, MlsNormals, MlsParams, WeightPower, fit_mls};
 use super::quality::{CurveQuality, analyse, curvatures};
@@ -135,6 +133,9 @@ pub struct CurveReport {
     pub quality: CurveQuality,
     /// Stage timings.
     pub timings_s: CurveTimings,
+    /// Incremental update diagnostics (`rbfsurf curve --add`), absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incremental: Option<super::editing::IncrementalReport>,
 }
 
 /// Everything a run produces.
@@ -298,13 +299,10 @@ pub fn grid_for(samples: &[Sample<2>], p: &CurveParams) -> Result<Grid2, Variati
     })
 }
 
-/// Contour a field over `grid`, skipping 8 × 8-cell blocks where the field proves its sign
-/// ([`ImplicitField::sign_on_ball`]).
+/// Contour a field over `grid`, evaluating only nodes near the zero set (blocks where the field
+/// proves its sign, [`ImplicitField::sign_on_ball`], are skipped; same curve as the full grid).
 pub fn contour_field(field: &dyn ImplicitField<2>, grid: &Grid2) -> Vec<Polyline> {
-    let f = |x: &[f64; 2]| field.value(x);
-    let test = |c: &[f64; 2], rho: f64| field.sign_on_ball(c, rho);
-    let values = sample_grid_blocked(&f, &test, grid, 8);
-    contour_values(&f, &values, grid, &MarchingParams::default())
+    super::adaptive::contour_adaptive(field, grid)
 }
 
 /// Fit, contour, analyse and draw.
@@ -332,6 +330,16 @@ pub fn run_workbench_with_progress(
     let t0 = Instant::now();
     let fitted = fit_curve_with_progress(samples, p, progress)?;
     progress.stage("contour");
+    finish_workbench(samples, fitted, p, t0.elapsed().as_secs_f64())
+}
+
+/// Contour, analyse and draw an already fitted field (`fit_s`: the fit time to report).
+pub fn finish_workbench(
+    samples: &[Sample<2>],
+    fitted: FittedCurve,
+    p: &CurveParams,
+    fit_s: f64,
+) -> Result<WorkbenchOutput, VariationalError> {
     let t1 = Instant::now();
     let grid = grid_for(samples, p)?;
     let field = |x: &[f64; 2]| fitted.field.value(x);
@@ -355,7 +363,7 @@ pub fn run_workbench_with_progress(
         title: &title,
     });
     let timings_s = CurveTimings {
-        fit: (t1 - t0).as_secs_f64(),
+        fit: fit_s,
         contour: (t2 - t1).as_secs_f64(),
         analyse: t2.elapsed().as_secs_f64(),
     };
@@ -371,6 +379,7 @@ pub fn run_workbench_with_progress(
         grid,
         quality,
         timings_s,
+        incremental: None,
     };
     Ok(WorkbenchOutput { svg, report, lines })
 }
