@@ -2,13 +2,13 @@
 # Jiang & Turk's MLP approximator and its baselines against the thin-plate RBF curve
 # (Turk–O'Brien) on Koch K2, Shen's 27 points and the five-point example.
 # Runs the release binary, keeps the JSON reports and one side-by-side SVG per data set in
-# docs/mlp/, and prints a markdown table (also written to docs/mlp/table.md).
+# benches/results/mlp/, and prints a markdown table (also written to benches/results/mlp/table.md).
 # Usage: benches/mlp_compare.sh            (from the repository root; builds the release binary)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet --bin rbfsurf
 BIN=${BIN:-target/release/rbfsurf}
-OUT=docs/mlp
+OUT=benches/results/mlp
 GRID=${GRID:-150}
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
