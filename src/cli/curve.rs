@@ -56,33 +56,6 @@ impl Progress for EpochBar {
     }
 }
 
-/// Fitting method names on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MethodArg {
-    /// Turk–O'Brien with pseudo-normal points.
-    TurkObrien,
-    /// Turk–O'Brien with true normals (gradient constraints).
-    TurkObrienNormals,
-    /// Turk–O'Brien with Mann's three-solve true normals.
-    TurkObrienMann,
-    /// Shen MLS, constant, pseudo-normals.
-    ShenConstant,
-    /// Shen MLS, linear, pseudo-normals.
-    ShenLinear,
-    /// Shen MLS, constant, true normals.
-    ShenConstantNormals,
-    /// Shen MLS, linear, true normals.
-    ShenLinearNormals,
-    /// Jiang & Turk's MLP with thin-plate energy at auxiliary points.
-    Mlp,
-    /// MLP without regulariser (λ = 0).
-    MlpNoreg,
-    /// MLP with the thin-plate energy at the constraint points only.
-    MlpConstraintCurvature,
-    /// MLP with dropout instead of the thin-plate energy.
-    MlpDropout,
-}
-
 /// Network options of the MLP methods.
 #[derive(Debug, Clone, clap::Args)]
 pub struct MlpArgs {
@@ -152,8 +125,8 @@ pub struct CurveArgs {
     #[arg(short = 'o', long)]
     pub output: PathBuf,
     /// Fitting method.
-    #[arg(long, value_enum, default_value_t = MethodArg::TurkObrien)]
-    pub method: MethodArg,
+    #[arg(long, value_enum, default_value_t = CurveMethod::TurkObrien)]
+    pub method: CurveMethod,
     /// Marching-squares cells along the longer side.
     #[arg(long, default_value_t = 200)]
     pub grid: usize,
@@ -217,21 +190,8 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
         (None, Some(path)) => read_samples(path)?,
         _ => anyhow::bail!("give either an input file or --dataset NAME (not both)"),
     };
-    let method = match a.method {
-        MethodArg::TurkObrien => CurveMethod::TurkObrien,
-        MethodArg::TurkObrienNormals => CurveMethod::TurkObrienNormals,
-        MethodArg::TurkObrienMann => CurveMethod::TurkObrienMann,
-        MethodArg::ShenConstant => CurveMethod::ShenConstant,
-        MethodArg::ShenLinear => CurveMethod::ShenLinear,
-        MethodArg::ShenConstantNormals => CurveMethod::ShenConstantNormals,
-        MethodArg::ShenLinearNormals => CurveMethod::ShenLinearNormals,
-        MethodArg::Mlp => CurveMethod::Mlp,
-        MethodArg::MlpNoreg => CurveMethod::MlpNoreg,
-        MethodArg::MlpConstraintCurvature => CurveMethod::MlpConstraintCurvature,
-        MethodArg::MlpDropout => CurveMethod::MlpDropout,
-    };
     let params = CurveParams {
-        method,
+        method: a.method,
         grid: a.grid,
         epsilon: a.epsilon,
         weight: WeightPower::Auto,
@@ -303,7 +263,7 @@ mod tests {
         let a = CurveArgs {
             input: None,
             output: dir.path().join("k.svg"),
-            method: MethodArg::ShenLinearNormals,
+            method: CurveMethod::ShenLinearNormals,
             grid: 60,
             epsilon: 0.0,
             offset: 0.1,
@@ -370,7 +330,7 @@ mod tests {
         let a = CurveArgs {
             input: Some(input),
             output: dir.path().join("b.svg"),
-            method: MethodArg::TurkObrien,
+            method: CurveMethod::TurkObrien,
             grid: 40,
             epsilon: 0.0,
             offset: 0.1,
@@ -401,7 +361,7 @@ mod tests {
         let a = CurveArgs {
             input: Some(base),
             output: dir.path().join("e.svg"),
-            method: MethodArg::TurkObrien,
+            method: CurveMethod::TurkObrien,
             grid: 60,
             epsilon: 0.0,
             offset: 0.1,
@@ -422,7 +382,7 @@ mod tests {
         assert!(inc["fresh_solve_s"].as_f64().unwrap() > 0.0);
         assert_eq!(j["samples"], 26);
         let shen = CurveArgs {
-            method: MethodArg::ShenLinear,
+            method: CurveMethod::ShenLinear,
             ..a
         };
         assert!(format!("{:#}", run(&shen).unwrap_err()).contains("turk-obrien"));

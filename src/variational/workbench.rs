@@ -19,8 +19,8 @@ use super::quality::{CurveQuality, analyse, curvatures};
 use super::svg::{SvgInput, render};
 use super::turk_obrien::{FitInfo, NormalMode, TurkObrienParams, fit_turk_obrien};
 
-/// The fitting method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+/// The fitting method (also the `rbfsurf curve --method` values).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum CurveMethod {
     /// Turk–O'Brien with pseudo-normal points (default).
@@ -37,7 +37,7 @@ pub enum CurveMethod {
     ShenConstantNormals,
     /// Shen MLS, linear basis, true normals.
     ShenLinearNormals,
-    /// Jiang & Turk's MLP with thin-plate energy at auxiliary points ([`super::mlp`]).
+    /// Jiang & Turk's MLP with thin-plate energy at auxiliary points (module `variational::mlp`).
     Mlp,
     /// MLP baseline (a): no regulariser (λ = 0).
     MlpNoreg,
