@@ -341,8 +341,8 @@ pub fn validate_samples<const D: usize>(samples: &[Sample<D>]) -> Result<(), Var
     Ok(())
 }
 
-/// Largest bounding-box edge of a point list (0 for fewer than two points).
-pub fn extent<const D: usize>(pts: impl Iterator<Item = [f64; D]>) -> f64 {
+/// Per-axis minimum and maximum of a point list (±inf for no points).
+pub fn bounds<const D: usize>(pts: impl Iterator<Item = [f64; D]>) -> ([f64; D], [f64; D]) {
     let mut lo = [f64::INFINITY; D];
     let mut hi = [f64::NEG_INFINITY; D];
     for p in pts {
@@ -351,6 +351,12 @@ pub fn extent<const D: usize>(pts: impl Iterator<Item = [f64; D]>) -> f64 {
             hi[k] = hi[k].max(p[k]);
         }
     }
+    (lo, hi)
+}
+
+/// Largest bounding-box edge of a point list (0 for fewer than two points).
+pub fn extent<const D: usize>(pts: impl Iterator<Item = [f64; D]>) -> f64 {
+    let (lo, hi) = bounds(pts);
     (0..D).map(|k| hi[k] - lo[k]).fold(0.0, f64::max).max(0.0)
 }
 

@@ -22,7 +22,7 @@
 //! sum would need a bound on the far mass; the dense data this family targets do not need it).
 
 use super::constraints::{
-    Offset, PseudoNormalParams, Sample, Sides, VariationalError, expand_pseudo_normals, unit,
+    Offset, PseudoNormalParams, Sample, Sides, VariationalError, expand_pseudo_normals,
     validate_samples,
 };
 use super::{Frame, ImplicitField};
@@ -136,14 +136,7 @@ pub fn fit_mls<const D: usize>(
         });
     }
     let frame = Frame::of_points(samples.iter().map(|s| s.p));
-    let norm: Vec<Sample<D>> = samples
-        .iter()
-        .map(|s| Sample {
-            p: frame.forward(&s.p),
-            normal: s.normal.map(|n| unit(&n)),
-            value: s.value,
-        })
-        .collect();
+    let norm: Vec<Sample<D>> = frame.normalize_samples(samples);
     let (pts, vals, normals) = match params.normals {
         MlsNormals::Pseudo(p) => {
             let c = expand_pseudo_normals(&norm, &p, 1.0)?;

@@ -96,14 +96,7 @@ pub struct Frame<const D: usize> {
 impl<const D: usize> Frame<D> {
     /// The frame of a point set.
     pub fn of_points(pts: impl Iterator<Item = [f64; D]> + Clone) -> Self {
-        let mut lo = [f64::INFINITY; D];
-        let mut hi = [f64::NEG_INFINITY; D];
-        for p in pts {
-            for k in 0..D {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = constraints::bounds(pts);
         let e = (0..D).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
         Frame {
             centre: std::array::from_fn(|k| {
@@ -115,6 +108,21 @@ impl<const D: usize> Frame<D> {
             }),
             scale: if e > 0.0 && e.is_finite() { e } else { 1.0 },
         }
+    }
+
+    /// The samples mapped into this frame, normals made unit length.
+    pub fn normalize_samples(
+        &self,
+        samples: &[constraints::Sample<D>],
+    ) -> Vec<constraints::Sample<D>> {
+        samples
+            .iter()
+            .map(|s| constraints::Sample {
+                p: self.forward(&s.p),
+                normal: s.normal.map(|n| constraints::unit(&n)),
+                value: s.value,
+            })
+            .collect()
     }
 
     /// Input units → normalised.

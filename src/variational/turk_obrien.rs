@@ -21,7 +21,7 @@ use faer::Mat;
 
 use super::constraints::{
     PseudoNormalParams, Sample, ValueConstraint, VariationalError, check_affine_rank,
-    expand_pseudo_normals, unit, validate_samples,
+    expand_pseudo_normals, validate_samples,
 };
 use super::dense::{SymmetricSolver, lower_from_fn};
 use super::kernel::{RadialKernel, RbfExpansion};
@@ -210,14 +210,7 @@ pub fn fit_turk_obrien<const D: usize>(
 ) -> Result<TurkObrienFit<D>, VariationalError> {
     validate_samples(samples)?;
     let frame = Frame::of_points(samples.iter().map(|s| s.p));
-    let norm: Vec<Sample<D>> = samples
-        .iter()
-        .map(|s| Sample {
-            p: frame.forward(&s.p),
-            normal: s.normal.map(|n| unit(&n)),
-            value: s.value,
-        })
-        .collect();
+    let norm: Vec<Sample<D>> = frame.normalize_samples(samples);
     let kernel = params.kernel.unwrap_or(match (D, params.normals) {
         (_, NormalMode::Hermite) | (3.., _) => RadialKernel::Cubic,
         _ => RadialKernel::ThinPlate,
