@@ -131,7 +131,8 @@ pub struct ReconParams {
     pub leaf_size: usize,
     /// Matrix ordering (default `bfs`, the seed's Algorithm III: as tight as RCM here and ~7× faster; used by the envelope solver and reported for all).
     pub ordering: OrderingKind,
-    /// Linear solver (default `sparse`: faer supernodal Cholesky with AMD).
+    /// Linear solver (default `auto`: faer supernodal Cholesky with AMD when its factor fits the
+    /// memory budget, else conjugate gradients).
     pub solver: SolverKind,
     /// Polynomial part (default none).
     pub polynomial: Polynomial,
@@ -149,6 +150,12 @@ pub struct ReconParams {
     pub outliers: Option<crate::geometry::outliers::OutlierParams>,
     /// Unsupported surface: trim or keep (default `auto`).
     pub boundary: Boundary,
+    /// CSRBF levels, coarse to fine, each halving the support radius (default 1: the seed's single
+    /// level; 3–5 fill holes and adapt to uneven density at 2–3× the evaluation cost).
+    pub levels: usize,
+    /// Block decomposition with a partition of unity (default `auto`: one system up to 250,000
+    /// points, blocks of at most 250,000 points above).
+    pub blocks: crate::rbf::Blocks,
 }
 
 impl Default for ReconParams {
@@ -161,7 +168,7 @@ impl Default for ReconParams {
             index: IndexKind::default(),
             leaf_size: 16,
             ordering: OrderingKind::Bfs,
-            solver: SolverKind::Sparse,
+            solver: SolverKind::Auto,
             polynomial: Polynomial::None,
             resolution: None,
             clean: CleanParams::default(),
@@ -169,6 +176,8 @@ impl Default for ReconParams {
             smoothing: 0.0,
             outliers: None,
             boundary: Boundary::Auto,
+            levels: 1,
+            blocks: crate::rbf::Blocks::Auto,
         }
     }
 }
@@ -244,6 +253,9 @@ impl ReconParams {
                 "a positive number (e.g. 2.5)",
             );
         }
+        if !(1..=8).contains(&self.levels) {
+            return err("levels", self.levels.to_string(), "an integer in 1..=8");
+        }
         if !(16..=1 << 22).contains(&self.max_memory_mib) {
             return err(
                 "max-memory-mib",
@@ -300,7 +312,7 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[param(value_type = Option<String>)]
     pub ordering: Option<OrderingKind>,
-    /// Solver: sparse (default, faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl).
+    /// Solver: auto (default: sparse when its factor fits --max-memory-mib, else cg), sparse (faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl), cg (Jacobi-preconditioned conjugate gradients, no factor).
     #[arg(long)]
     #[serde(default, with = "from_str_opt")]
     #[param(value_type = Option<String>)]
@@ -344,6 +356,15 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[param(value_type = Option<String>)]
     pub boundary: Option<Boundary>,
+    /// CSRBF levels, coarse to fine, each halving the support radius: 1 (default, the seed's single level) to 8; 3–5 fill holes and adapt to uneven density.
+    #[arg(long)]
+    #[serde(default)]
+    pub levels: Option<usize>,
+    /// Partition-of-unity blocks: auto (default: one system up to 250,000 points, blocks of at most 250,000 above), none (one global system), or the maximum points per block (≥ 1000).
+    #[arg(long)]
+    #[serde(default, with = "from_str_opt")]
+    #[param(value_type = Option<String>)]
+    pub blocks: Option<crate::rbf::Blocks>,
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -378,6 +399,8 @@ impl TryFrom<&ReconOptions> for ReconParams {
                 }
             }),
             boundary: a.boundary.unwrap_or(d.boundary),
+            levels: a.levels.unwrap_or(d.levels),
+            blocks: a.blocks.unwrap_or(d.blocks),
         };
         p.validate()?;
         Ok(p)

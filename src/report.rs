@@ -73,8 +73,36 @@ pub struct MatrixReport {
     pub profile_values: usize,
     /// Values of a dense `n × n` matrix.
     pub dense_values: usize,
-    /// Values stored by the factor actually computed.
+    /// Values stored by the factor actually computed (summed over levels).
     pub factor_values: usize,
+    /// Solver that ran: `sparse`, `envelope`, `ldl`, `cg` (several joined by `+` across levels), or
+    /// the dense solver of a global method.
+    pub solver_used: String,
+    /// Per-level systems of a CSRBF fit, coarse to fine (one entry for a single-level fit; the
+    /// other fields then describe the finest level, except `factor_values`, which sums all levels).
+    pub levels: Vec<LevelReport>,
+    /// Blocks of the partition of unity (1 = one global system); per-level entries then sum the
+    /// blocks' systems (n, nnz, factor values) and take the largest iteration count.
+    pub blocks: usize,
+}
+
+/// One level of a multi-level CSRBF fit.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LevelReport {
+    /// Centres of the level.
+    pub n: usize,
+    /// Stored non-zeros of its matrix.
+    pub nnz: usize,
+    /// Support radius, normalised units.
+    pub support: f64,
+    /// Values stored by its factor (0 for conjugate gradients).
+    pub factor_values: usize,
+    /// Conjugate-gradient iterations, when that solver ran.
+    pub iterations: Option<usize>,
+    /// Solver that ran for this level.
+    pub solver: &'static str,
+    /// RMS of the level's right-hand side (what it had left to interpolate), normalised units.
+    pub rhs_rms: f64,
 }
 
 /// RMS and maximum of `|f(P_i)|`.

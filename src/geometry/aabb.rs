@@ -104,6 +104,16 @@ impl Aabb {
             .sum()
     }
 
+    /// Whether the two boxes share a point (touching counts).
+    pub fn intersects(&self, other: &Aabb) -> bool {
+        (0..3).all(|k| self.min[k] <= other.max[k] && other.min[k] <= self.max[k])
+    }
+
+    /// Whether `p` lies in the closed box.
+    pub fn contains(&self, p: &Point3) -> bool {
+        (0..3).all(|k| self.min[k] <= p[k] && p[k] <= self.max[k])
+    }
+
     /// Squared distance from `p` to the farthest corner of the box.
     pub fn max_dist2_to(&self, p: &Point3) -> f64 {
         (0..3)

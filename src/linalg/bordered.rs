@@ -70,7 +70,7 @@ pub fn solve_bordered(
         })
         .collect();
     cols.par_iter_mut()
-        .for_each(|col| factor.solve_in_place(col));
+        .try_for_each(|col| factor.solve_checked(col))?;
     let (w, u) = cols.split_at(4);
     let u = &u[0];
     let mut s = [[0.0f64; 4]; 4];
@@ -170,6 +170,7 @@ mod tests {
         for kind in SolverKind::ALL {
             let params = SolverParams {
                 kind,
+                cg_tolerance: 1e-14,
                 ..Default::default()
             };
             let perm = random_perm(n, 3);

@@ -8,6 +8,8 @@
 //!   follow the profile of the (reordered) matrix: O(profile) values, O(Σ row_len²) flops.
 //! * [`SolverKind::Sparse`]: faer's supernodal sparse Cholesky with its own AMD ordering.
 //! * [`SolverKind::Ldl`]: sprs-ldl's up-looking LDLᵀ, a single-threaded reference solver.
+//! * [`SolverKind::Cg`]: Jacobi-preconditioned conjugate gradients; stores no factor (memory
+//!   `O(nnz)`), the choice when a factor does not fit the memory budget.
 //!
 //! The polynomial border of the CSRBF system is handled by block elimination in [`solve_bordered`]
 //! (George & Liu), reusing the factor of `A`.
@@ -16,6 +18,7 @@
 //! matrix holds original row `perm[new]`. Factors take and return vectors in the ORIGINAL order.
 
 mod bordered;
+mod cg;
 mod envelope;
 mod envelope_kernels;
 mod ldl;
@@ -41,6 +44,16 @@ pub trait SpdFactor: Send + Sync {
     fn solve_in_place(&self, b: &mut [f64]);
     /// Number of stored values of the factor (the memory it holds, in f64 values).
     fn factor_values(&self) -> usize;
+    /// Like [`SpdFactor::solve_in_place`], but reports a failed solve (an iterative solver that did
+    /// not converge). Direct factors always succeed.
+    fn solve_checked(&self, b: &mut [f64]) -> Result<(), LinalgError> {
+        self.solve_in_place(b);
+        Ok(())
+    }
+    /// Iterations of the most demanding solve so far, for iterative solvers; `None` for factors.
+    fn iterations(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Which factorisation [`factorize`] uses.
@@ -53,11 +66,23 @@ pub enum SolverKind {
     Sparse,
     /// sprs-ldl LDLᵀ (reference, single-threaded); honours the given ordering (`"ldl"`).
     Ldl,
+    /// Jacobi-preconditioned conjugate gradients; no factor, memory `O(nnz)` (`"cg"`).
+    Cg,
+    /// `sparse` when its factor fits [`SolverParams::max_factor_values`], else `cg` (`"auto"`).
+    Auto,
 }
 
 impl SolverKind {
     /// All kinds, in a fixed order (for option lists and test grids).
-    pub const ALL: [SolverKind; 3] = [SolverKind::Envelope, SolverKind::Sparse, SolverKind::Ldl];
+    pub const ALL: [SolverKind; 5] = [
+        SolverKind::Envelope,
+        SolverKind::Sparse,
+        SolverKind::Ldl,
+        SolverKind::Cg,
+        SolverKind::Auto,
+    ];
+    /// The direct (factorising) kinds.
+    pub const DIRECT: [SolverKind; 3] = [SolverKind::Envelope, SolverKind::Sparse, SolverKind::Ldl];
 
     /// The name used on the command line, in the API and in reports.
     pub fn name(self) -> &'static str {
@@ -65,6 +90,8 @@ impl SolverKind {
             SolverKind::Envelope => "envelope",
             SolverKind::Sparse => "sparse",
             SolverKind::Ldl => "ldl",
+            SolverKind::Cg => "cg",
+            SolverKind::Auto => "auto",
         }
     }
 }
@@ -77,7 +104,9 @@ impl fmt::Display for SolverKind {
 
 /// Error returned when a solver name is not one of `envelope`, `sparse`, `ldl`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown solver {0:?}: expected one of \"envelope\", \"sparse\", \"ldl\"")]
+#[error(
+    "unknown solver {0:?}: expected one of \"envelope\", \"sparse\", \"ldl\", \"cg\", \"auto\""
+)]
 pub struct UnknownSolver(pub String);
 
 impl FromStr for SolverKind {
@@ -92,13 +121,17 @@ impl FromStr for SolverKind {
 }
 
 /// Parameters of [`factorize`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolverParams {
     /// Which factorisation to run.
     pub kind: SolverKind,
     /// Refuse (with [`LinalgError::TooLarge`]) factors that would store more f64 values than this.
     /// Default 400,000,000 values (about 3 GiB).
     pub max_factor_values: usize,
+    /// Conjugate gradients: stop when `‖b − A x‖ ≤ cg_tolerance · ‖b‖` (default 1e-10).
+    pub cg_tolerance: f64,
+    /// Conjugate gradients: give up after this many iterations (default 5000).
+    pub cg_max_iterations: usize,
 }
 
 impl Default for SolverParams {
@@ -106,6 +139,8 @@ impl Default for SolverParams {
         SolverParams {
             kind: SolverKind::default(),
             max_factor_values: 400_000_000,
+            cg_tolerance: 1e-10,
+            cg_max_iterations: 5000,
         }
     }
 }
@@ -176,6 +211,17 @@ pub enum LinalgError {
         column: usize,
         /// The pivot divided by the original diagonal entry.
         relative_pivot: f64,
+    },
+    /// Conjugate gradients did not reach the tolerance.
+    #[error(
+        "conjugate gradients did not converge in {iterations} iterations (relative residual \
+         {relative_residual:.3e}); use `--solver sparse` or a smaller support radius"
+    )]
+    NotConverged {
+        /// Iterations run.
+        iterations: usize,
+        /// `‖b − A x‖ / ‖b‖` of the last iterate.
+        relative_residual: f64,
     },
     /// The caller cancelled the work through [`Progress::cancelled`].
     #[error("cancelled")]
@@ -287,7 +333,42 @@ pub fn factorize(
             let (f, s) = ldl::factorize_ldl(a, perm, params, progress)?;
             Ok((Box::new(f), s))
         }
+        SolverKind::Cg => {
+            let (f, s) = cg::prepare_cg(a.clone(), params, progress)?;
+            Ok((Box::new(f), s))
+        }
+        SolverKind::Auto => match sparse::factorize_sparse(a, params, progress) {
+            Err(LinalgError::TooLarge { .. }) => {
+                let (f, s) = cg::prepare_cg(a.clone(), params, progress)?;
+                Ok((Box::new(f), s))
+            }
+            other => other.map(|(f, s)| (Box::new(f) as Box<dyn SpdFactor>, s)),
+        },
     }
+}
+
+/// [`factorize`] taking ownership of `a`: conjugate gradients keep the matrix itself instead of a
+/// copy (the matrix is the whole memory of that solver); the direct solvers drop it after factoring.
+pub fn factorize_owned(
+    a: CsMat<f64>,
+    perm: Option<&[usize]>,
+    params: &SolverParams,
+    progress: &dyn Progress,
+) -> Result<(Box<dyn SpdFactor>, FactorStats), LinalgError> {
+    validate(&a, perm)?;
+    match params.kind {
+        SolverKind::Cg => {}
+        SolverKind::Auto => match sparse::factorize_sparse(&a, params, progress) {
+            Err(LinalgError::TooLarge { .. }) => {}
+            other => return other.map(|(f, s)| (Box::new(f) as Box<dyn SpdFactor>, s)),
+        },
+        _ => return factorize(&a, perm, params, progress),
+    }
+    if progress.cancelled() {
+        return Err(LinalgError::Cancelled);
+    }
+    let (f, s) = cg::prepare_cg(a, params, progress)?;
+    Ok((Box::new(f), s))
 }
 
 /// Number of f64 values the factor of `a` would store with solver `kind` and ordering `perm`,
@@ -305,6 +386,8 @@ pub fn estimate_factor_values(
         SolverKind::Envelope => Ok(envelope_size(a, perm)?.total),
         SolverKind::Sparse => sparse::estimate_sparse(a),
         SolverKind::Ldl => Ok(ldl::estimate_ldl(a, perm)),
+        SolverKind::Cg => Ok(0),
+        SolverKind::Auto => sparse::estimate_sparse(a),
     }
 }
 
@@ -344,6 +427,7 @@ mod tests {
     fn params(kind: SolverKind) -> SolverParams {
         SolverParams {
             kind,
+            cg_tolerance: 1e-14,
             ..Default::default()
         }
     }
@@ -396,10 +480,11 @@ mod tests {
     #[test]
     fn oversized_factor_is_refused_with_its_size() {
         let (_, a) = test_matrix(100, 20.0, 4);
-        for kind in SolverKind::ALL {
+        for kind in SolverKind::DIRECT {
             let p = SolverParams {
                 kind,
                 max_factor_values: 10,
+                ..Default::default()
             };
             let values = estimate_factor_values(&a, None, kind).unwrap();
             match factorize(&a, None, &p, &NoProgress).err() {
@@ -469,7 +554,8 @@ mod tests {
             assert_eq!(kind.to_string().parse::<SolverKind>(), Ok(kind));
         }
         assert_eq!("LDL".parse::<SolverKind>(), Ok(SolverKind::Ldl));
-        assert!("cg".parse::<SolverKind>().is_err());
+        assert_eq!("cg".parse::<SolverKind>(), Ok(SolverKind::Cg));
+        assert!("gmres".parse::<SolverKind>().is_err());
         assert_eq!(SolverKind::default(), SolverKind::Sparse);
         assert_eq!(SolverParams::default().max_factor_values, 400_000_000);
     }

@@ -3,16 +3,16 @@
 use super::{FittedField, check_cancel, clean_and_normalize, residual_at};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, PointCloud};
-use crate::linalg::{SolverParams, factorize, solve_bordered};
+use crate::linalg::{SolverKind, SolverParams, factorize_owned, solve_bordered};
 use crate::normals::{NormalParams, estimate_oriented_normals};
 use crate::ordering::{MatrixShape, Permutation, compute_ordering, matrix_shape};
 use crate::params::{Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
-    Carrier, CarrierKind, RbfError, RbfField, SupportEstimate, assemble_matrix, estimate_support,
-    fit_carrier,
+    Carrier, CarrierKind, Correction, Kernel, LevelPlan, RbfError, RbfField, Spline, SplineLevel,
+    SupportEstimate, assemble_matrix, estimate_support, fit_carrier, plan_levels,
 };
-use crate::report::{MatrixReport, Timings};
+use crate::report::{LevelReport, MatrixReport, Timings};
 use crate::spatial::{SpatialIndex, build_index};
 use rayon::prelude::*;
 use sprs::CsMat;
@@ -35,7 +35,13 @@ pub fn fit_field(
     let index: Arc<dyn SpatialIndex + Send> =
         Arc::from(build_index(&points, params.index, params.leaf_size)?);
     let support = estimate_support(&points, index.as_ref(), params.support)?;
-    check_memory(&support, points.len(), params.max_memory_mib)?;
+    let count = params.levels;
+    // With blocks only one block's system is alive at a time (core plus overlap: ~1.5× its core).
+    let alive = params
+        .blocks
+        .max_points(points.len())
+        .map_or(1.0, |m| (1.5 * m as f64 / points.len() as f64).min(1.0));
+    check_memory(&support, alive, count, params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
 
     progress.stage("carrier");
@@ -51,35 +57,35 @@ pub fn fit_field(
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
-    let (a, perm, shape) = assemble_and_order(
-        &points,
-        index.as_ref(),
-        support.radius,
-        params,
-        progress,
-        timings,
-    )?;
-    let (weights, polynomial, factor_values) =
-        solve_weights(&a, &perm.perm, &rhs, &points, params, progress, timings)?;
-    let matrix = MatrixReport {
-        n: shape.n,
-        nnz: shape.nnz,
-        bandwidth: shape.bandwidth,
-        profile_values: shape.profile_values,
-        dense_values: shape.dense_values,
-        factor_values,
+    let (correction, matrix) = match params.blocks.max_points(points.len()) {
+        None => {
+            let plans = plan_levels(
+                &points,
+                index.as_ref(),
+                support.radius,
+                support.mean_neighbours,
+                count,
+            );
+            let (spline, matrix) =
+                fit_levels(&points, &index, &plans, rhs, params, progress, timings)?;
+            (Correction::Global(spline), matrix)
+        }
+        Some(max_points) => {
+            let (blocks, matrix) = super::blocks::fit_blocks(
+                &points, &rhs, &support, count, max_points, params, progress, timings,
+            )?;
+            (Correction::Blocks(blocks), matrix)
+        }
     };
-    drop(a);
     let carrier_name = carrier.name();
     let carrier_bounds = carrier.zero_set_bounds();
     let field = RbfField {
-        centres: points.clone(),
-        weights,
-        polynomial,
+        correction,
         kernel: params.kernel,
-        support: support.radius,
         carrier,
-        index,
+        carrier_index: index,
+        carrier_radius: support.radius,
+        finest_support: support.radius,
     };
     let t = Instant::now();
     let residual = residual_at(&field, &points);
@@ -101,6 +107,119 @@ pub fn fit_field(
     })
 }
 
+/// Fit the planned levels coarse to fine: level `l` interpolates `target`, what the carrier and the
+/// coarser levels left at its centres; `target` is then updated at every point. The polynomial, when
+/// asked, is fitted with the coarsest level. Returns the spline and the report.
+pub(crate) fn fit_levels(
+    points: &[Point3],
+    index: &Arc<dyn SpatialIndex + Send>,
+    plans: &[LevelPlan],
+    mut target: Vec<f64>,
+    params: &ReconParams,
+    progress: &dyn Progress,
+    timings: &mut Timings,
+) -> Result<(Spline, MatrixReport), ReconError> {
+    let mut levels = Vec::with_capacity(plans.len());
+    let mut polynomial = None;
+    let mut matrix = MatrixReport::default();
+    for (l, plan) in plans.iter().enumerate() {
+        let (centres, level_index) = if plan.members.len() == points.len() {
+            (points.to_vec(), Arc::clone(index))
+        } else {
+            let c: Vec<Point3> = plan.members.iter().map(|&i| points[i as usize]).collect();
+            let ix: Arc<dyn SpatialIndex + Send> =
+                Arc::from(build_index(&c, params.index, params.leaf_size)?);
+            (c, ix)
+        };
+        let rhs: Vec<f64> = plan.members.iter().map(|&i| target[i as usize]).collect();
+        let rhs_rms = (rhs.iter().map(|v| v * v).sum::<f64>() / rhs.len().max(1) as f64).sqrt();
+        let (a, perm, shape) = assemble_and_order(
+            &centres,
+            level_index.as_ref(),
+            plan.radius,
+            params,
+            progress,
+            timings,
+        )?;
+        let poly_kind = if l == 0 {
+            params.polynomial
+        } else {
+            Polynomial::None
+        };
+        let solved = solve_weights(
+            a, &perm.perm, &rhs, &centres, poly_kind, params, progress, timings,
+        )?;
+        let level = SplineLevel {
+            centres,
+            weights: solved.weights,
+            support: plan.radius,
+            index: level_index,
+        };
+        if l + 1 < plans.len() {
+            subtract_level(
+                &mut target,
+                points,
+                &level,
+                params.kernel,
+                solved.polynomial,
+            );
+        }
+        polynomial = polynomial.or(solved.polynomial);
+        matrix = MatrixReport {
+            n: shape.n,
+            nnz: shape.nnz,
+            bandwidth: shape.bandwidth,
+            profile_values: shape.profile_values,
+            dense_values: shape.dense_values,
+            factor_values: matrix.factor_values + solved.factor_values,
+            solver_used: join_solver(&matrix.solver_used, solved.solver),
+            levels: std::mem::take(&mut matrix.levels),
+            blocks: 1,
+        };
+        matrix.levels.push(LevelReport {
+            n: shape.n,
+            nnz: shape.nnz,
+            support: plan.radius,
+            factor_values: solved.factor_values,
+            iterations: solved.iterations,
+            solver: solved.solver,
+            rhs_rms,
+        });
+        levels.push(level);
+        check_cancel(progress)?;
+    }
+    matrix.blocks = 1;
+    Ok((Spline { levels, polynomial }, matrix))
+}
+
+/// `target_i −= s_l(P_i) + p(P_i)` for every point (parallel).
+fn subtract_level(
+    target: &mut [f64],
+    points: &[Point3],
+    level: &SplineLevel,
+    kernel: Kernel,
+    polynomial: Option<[f64; 4]>,
+) {
+    target
+        .par_iter_mut()
+        .zip(points.par_iter())
+        .for_each_init(Vec::new, |hits, (t, p)| {
+            let poly = polynomial.map_or(0.0, |v| v[0] + v[1] * p[0] + v[2] * p[1] + v[3] * p[2]);
+            *t -= level.value(kernel, p, hits) + poly;
+        });
+}
+
+/// `"sparse"`, `"sparse+cg"`, ...: the distinct solvers that ran, in order.
+pub(crate) fn join_solver(so_far: &str, next: &str) -> String {
+    if so_far.is_empty() {
+        next.to_string()
+    } else if so_far.split('+').any(|s| s == next) {
+        so_far.to_string()
+    } else {
+        format!("{so_far}+{next}")
+    }
+}
+
 /// Assemble `A (+ λI)` and compute the ordering and the matrix shape under it (stages `assemble`, `order`).
 fn assemble_and_order(
     points: &[Point3],
@@ -120,26 +239,34 @@ fn assemble_and_order(
         params.smoothing,
         progress,
     )?;
-    timings.assemble = t.elapsed().as_secs_f64();
+    timings.assemble += t.elapsed().as_secs_f64();
     progress.stage("order");
     let t = Instant::now();
     let perm = compute_ordering(params.ordering, points, radius, &a, None)?;
     let shape = matrix_shape(&a, &perm)?;
-    timings.order = t.elapsed().as_secs_f64();
+    timings.order += t.elapsed().as_secs_f64();
     check_cancel(progress)?;
     Ok((a, perm, shape))
 }
 
-/// Spline weights, the linear polynomial when fitted, and the factor's stored values.
-type Solved = (Vec<f64>, Option<[f64; 4]>, usize);
+/// A solved level: weights, polynomial, factor size, iterations and the solver that ran.
+struct Solved {
+    weights: Vec<f64>,
+    polynomial: Option<[f64; 4]>,
+    factor_values: usize,
+    iterations: Option<usize>,
+    solver: &'static str,
+}
 
-/// Factorise `A` and solve for the weights (and the linear polynomial through the bordered system),
-/// within the memory budget (stages `factor`, `solve`). Returns (weights, polynomial, factor values).
+/// Factorise `A` (or prepare conjugate gradients on it) and solve for the weights (and the linear
+/// polynomial through the bordered system), within the memory budget (stages `factor`, `solve`).
+#[allow(clippy::too_many_arguments)]
 fn solve_weights(
-    a: &CsMat<f64>,
+    a: CsMat<f64>,
     perm: &[usize],
     rhs: &[f64],
     points: &[Point3],
+    polynomial: Polynomial,
     params: &ReconParams,
     progress: &dyn Progress,
     timings: &mut Timings,
@@ -151,25 +278,38 @@ fn solve_weights(
     let solver = SolverParams {
         kind: params.solver,
         max_factor_values: budget_values,
+        ..Default::default()
     };
-    let (factor, fstats) = factorize(a, Some(perm), &solver, progress)?;
-    timings.factor = t.elapsed().as_secs_f64();
+    let (factor, fstats) = factorize_owned(a, Some(perm), &solver, progress)?;
+    timings.factor += t.elapsed().as_secs_f64();
     progress.stage("solve");
     let t = Instant::now();
-    let solved = match params.polynomial {
+    let (weights, poly) = match polynomial {
         Polynomial::None => {
             let mut x = rhs.to_vec();
-            factor.solve_in_place(&mut x);
-            (x, None, fstats.factor_values)
+            factor.solve_checked(&mut x)?;
+            (x, None)
         }
         Polynomial::Linear => {
             let poly: Vec<[f64; 4]> = points.iter().map(|p| [1.0, p[0], p[1], p[2]]).collect();
             let (x, v) = solve_bordered(factor.as_ref(), &poly, rhs)?;
-            (x, Some(v), fstats.factor_values)
+            (x, Some(v))
         }
     };
-    timings.solve = t.elapsed().as_secs_f64();
-    Ok(solved)
+    timings.solve += t.elapsed().as_secs_f64();
+    let iterations = factor.iterations();
+    let solver = match (params.solver, iterations) {
+        (_, Some(_)) => "cg",
+        (SolverKind::Auto, None) => "sparse",
+        (k, None) => k.name(),
+    };
+    Ok(Solved {
+        weights,
+        polynomial: poly,
+        factor_values: fstats.factor_values,
+        iterations,
+        solver,
+    })
 }
 
 /// Estimate oriented normals (PCA + MST propagation) when the input has none and the carrier is
@@ -190,8 +330,18 @@ fn estimate_missing_normals(
 }
 
 /// Refuse before assembly when the matrix alone (values + indices, twice during assembly) would not fit.
-fn check_memory(s: &SupportEstimate, n: usize, budget_mib: u64) -> Result<(), RbfError> {
-    let mib = s.estimated_nnz * 32.0 / (1u64 << 20) as f64;
+/// With several levels the matrices hold about 4/3 of the finest level's values in all (levels
+/// are fitted one after the other, so only one is alive at a time; the bound is conservative).
+/// `alive` is the share of the points whose system is in memory at once (1 without blocks).
+fn check_memory(
+    s: &SupportEstimate,
+    alive: f64,
+    levels: usize,
+    budget_mib: u64,
+) -> Result<(), RbfError> {
+    let share = if levels > 1 { 4.0 / 3.0 } else { 1.0 } * alive;
+    let mib = s.estimated_nnz * share * 32.0 / (1u64 << 20) as f64;
+    let n = (s.estimated_nnz / s.mean_neighbours.max(1.0)).round() as usize;
     if mib > budget_mib as f64 {
         return Err(RbfError::TooLarge {
             support: s.radius,

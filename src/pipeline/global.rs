@@ -48,6 +48,9 @@ pub(super) fn fit_global(
                 profile_values: n * (n + 1) / 2,
                 dense_values: n * n,
                 factor_values: n * n,
+                solver_used: "dense-lblt".into(),
+                levels: Vec::new(),
+                blocks: 1,
             };
             (Box::new(f), dense)
         }

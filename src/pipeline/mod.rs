@@ -14,6 +14,7 @@ use crate::report::{
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod blocks;
 mod csrbf;
 mod global;
 
@@ -90,11 +91,11 @@ fn reconstruct_inner(
     let resolution = params
         .resolution
         .unwrap_or_else(|| auto_resolution(fit.support.spacing));
-    let domain = polygonize_domain(&fit, resolution);
+    let (domain, grid_resolution) = polygonize_domain(&fit, resolution, params.boundary);
     progress.stage("polygonize");
     let t = Instant::now();
     let pp = PolygonizeParams {
-        resolution,
+        resolution: grid_resolution,
         ..Default::default()
     };
     let (mut mesh, stats) = polygonize(fit.field.as_ref(), &domain, &pp, progress)?;
@@ -125,7 +126,8 @@ fn reconstruct_inner(
             blocks_active: stats.blocks_active,
             field_evaluations: stats.field_evaluations,
             trimmed_triangles,
-            cell_size: domain.extent().iter().fold(0.0f64, |a, &b| a.max(b)) / resolution as f64,
+            cell_size: domain.extent().iter().fold(0.0f64, |a, &b| a.max(b))
+                / grid_resolution as f64,
         },
     };
     Ok(Reconstruction { mesh, report })
@@ -160,15 +162,24 @@ pub fn auto_resolution(spacing: f64) -> usize {
 }
 
 /// The box the polygonizer marches: the points and the carrier's own zero set, with a margin of
-/// one support radius plus two cells so the field is positive on its boundary.
-fn polygonize_domain(fit: &FittedField, resolution: usize) -> Aabb {
+/// one support radius plus two cells so the field is positive on its boundary; with
+/// `--boundary closed` at least a quarter of the longest edge, room for the surface that closes a
+/// hole to bulge beyond the data (the grid then gets more cells, so the cell size stays the
+/// same). Returns the box and the number of cells along its longest edge.
+fn polygonize_domain(fit: &FittedField, resolution: usize, boundary: Boundary) -> (Aabb, usize) {
     let mut b = Aabb::from_points(&fit.points);
     if let Some(c) = fit.carrier_bounds {
         b.grow(&c.min);
         b.grow(&c.max);
     }
     let longest = b.extent().iter().fold(0.0f64, |a, &x| a.max(x));
-    b.inflated(fit.support_radius + 3.0 * longest / resolution as f64)
+    let margin = fit.support_radius + 3.0 * longest / resolution as f64;
+    if boundary != Boundary::Closed || margin >= 0.25 * longest {
+        return (b.inflated(margin), resolution);
+    }
+    let closing = 0.25 * longest;
+    let cells = (resolution as f64 * (longest + 2.0 * closing) / (longest + 2.0 * margin)).ceil();
+    (b.inflated(closing), (cells as usize).min(4096))
 }
 
 fn params_report(

@@ -1,55 +1,115 @@
-//! The fitted implicit field `f(x) = g(x) + Σ λ_i φ(|x − P_i| / R) + p(x)` (normalised units),
-//! evaluated with the spatial index so only the centres within `R` of `x` are visited
-//! (`O(log n + k)` per evaluation). One neighbour query serves both the spline and a local carrier.
+//! The fitted implicit field `f(x) = g(x) + Σ_l Σ_i λ_{l,i} φ(|x − P_{l,i}| / R_l) + p(x)`
+//! (normalised units): the carrier `g`, one CSRBF spline per level `l` (a single level is the seed's
+//! method; several are the coarse-to-fine hierarchy of [`super::levels`]) and an optional linear
+//! polynomial. Each level is evaluated with its own spatial index so only the centres within `R_l`
+//! of `x` are visited (`O(L log n + k)` per evaluation). A local carrier shares the finest query.
 //! Implements [`ScalarField`], including the batched [`ScalarField::values_in`] that gathers the
 //! candidate centres once per small box of grid corners.
 
+use super::pou::PouBlock;
 use super::{Carrier, Kernel};
 use crate::geometry::{Aabb, Point3, dist2, sub};
 use crate::polygonize::ScalarField;
 use crate::spatial::SpatialIndex;
 use std::sync::Arc;
 
-/// A solved CSRBF implicit field.
-pub struct RbfField {
-    /// Centres `P_i`, normalised units.
+/// One level of the spline: centres, weights, support radius and an index over the centres.
+pub struct SplineLevel {
+    /// Centres `P_{l,i}`, normalised units.
     pub centres: Vec<Point3>,
-    /// Spline weights `λ_i`.
+    /// Weights `λ_{l,i}`.
     pub weights: Vec<f64>,
-    /// Linear polynomial `[v₀, v_x, v_y, v_z]` (`p(x) = v₀ + v·x`), when fitted.
-    pub polynomial: Option<[f64; 4]>,
-    /// Kernel `φ`.
-    pub kernel: Kernel,
-    /// Support radius `R`, normalised units.
+    /// Support radius `R_l`, normalised units.
     pub support: f64,
-    /// Carrier solid `g`.
-    pub carrier: Carrier,
     /// Index over `centres`.
     pub index: Arc<dyn SpatialIndex + Send>,
 }
 
-impl RbfField {
-    /// `f(x)` given `candidates`, a superset of the centres within `R` of `x`.
-    fn value_with(&self, x: &Point3, candidates: &[u32]) -> f64 {
+impl SplineLevel {
+    /// `Σ_i λ_i φ(|x − P_i| / R)` over `candidates` (a superset of the centres within `R` of `x`).
+    pub fn value_with(&self, kernel: Kernel, x: &Point3, candidates: &[u32]) -> f64 {
         let r2 = self.support * self.support;
         let inv_r = 1.0 / self.support;
-        let mut spline = 0.0;
+        let mut s = 0.0;
         for &i in candidates {
             let d2 = dist2(*x, self.centres[i as usize]);
             if d2 < r2 {
-                spline += self.weights[i as usize] * self.kernel.value(d2.sqrt() * inv_r);
+                s += self.weights[i as usize] * kernel.value(d2.sqrt() * inv_r);
             }
         }
-        let g = match &self.carrier {
-            Carrier::Local(l) => l.value_gradient_with(x, candidates).0,
-            c => c.value(x),
-        };
-        g + spline + self.poly_value(x)
+        s
     }
 
+    /// `Σ_i λ_i φ(|x − P_i| / R)`, querying the index.
+    pub fn value(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>) -> f64 {
+        self.index.within(x, self.support, hits);
+        self.value_with(kernel, x, hits)
+    }
+
+    /// Gradient of this level's spline at `x`, added to `g`.
+    fn add_gradient(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>, g: &mut Point3) {
+        self.index.within(x, self.support, hits);
+        let inv_r = 1.0 / self.support;
+        for &i in hits.iter() {
+            let c = self.centres[i as usize];
+            let r = dist2(*x, c).sqrt() * inv_r;
+            let s = self.weights[i as usize] * kernel.derivative_over_r(r) * inv_r * inv_r;
+            let d = sub(*x, c);
+            for k in 0..3 {
+                g[k] += s * d[k];
+            }
+        }
+    }
+}
+
+/// One spline `U(x) = Σ_l Σ_i λ_{l,i} φ(|x − P_{l,i}| / R_l) + p(x)`: the levels (coarse to fine)
+/// and the optional linear polynomial. The whole correction of a global fit, or one block's.
+pub struct Spline {
+    /// Levels, coarse to fine (one for the seed's single-level method).
+    pub levels: Vec<SplineLevel>,
+    /// Linear polynomial `[v₀, v_x, v_y, v_z]` (`p(x) = v₀ + v·x`), when fitted.
+    pub polynomial: Option<[f64; 4]>,
+}
+
+impl Spline {
     fn poly_value(&self, x: &Point3) -> f64 {
         self.polynomial
             .map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
+    }
+
+    /// `U(x)` over the first `upto` levels (all: `usize::MAX`).
+    pub fn value(&self, kernel: Kernel, x: &Point3, upto: usize, hits: &mut Vec<u32>) -> f64 {
+        let mut v = self.poly_value(x);
+        for l in self.levels.iter().take(upto) {
+            v += l.value(kernel, x, hits);
+        }
+        v
+    }
+
+    /// `U` at each of `points` (inside `region`), added to `out`; one query per level.
+    fn add_values_in(&self, kernel: Kernel, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        let (c, half) = (region.center(), 0.5 * region.diagonal());
+        let mut hits = Vec::with_capacity(256);
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o += self.poly_value(p);
+        }
+        for l in &self.levels {
+            l.index.within(&c, half + l.support, &mut hits);
+            for (p, o) in points.iter().zip(out.iter_mut()) {
+                *o += l.value_with(kernel, p, &hits);
+            }
+        }
+    }
+
+    /// `(U(x), ∇U(x))`.
+    fn value_gradient(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>) -> (f64, Point3) {
+        let mut g = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        let mut v = self.poly_value(x);
+        for l in &self.levels {
+            v += l.value(kernel, x, hits);
+            l.add_gradient(kernel, x, hits, &mut g);
+        }
+        (v, g)
     }
 
     fn poly_gradient_norm(&self) -> f64 {
@@ -58,68 +118,189 @@ impl RbfField {
     }
 }
 
+/// How the carrier is corrected: one global spline, or a partition of unity of block splines.
+pub enum Correction {
+    /// `f = g + U` (the seed's global system, single- or multi-level).
+    Global(Spline),
+    /// `f = g + Σ_b w_b U_b / Σ_b w_b` over overlapping blocks ([`super::pou`]); `g` where no block
+    /// reaches.
+    Blocks(Vec<PouBlock>),
+}
+
+/// A solved CSRBF implicit field.
+pub struct RbfField {
+    /// The spline part.
+    pub correction: Correction,
+    /// Kernel `φ`.
+    pub kernel: Kernel,
+    /// Carrier solid `g`.
+    pub carrier: Carrier,
+    /// Index over the carrier's points (all data points), for a local carrier's neighbour queries
+    /// and the polygonizer's "near the data" test.
+    pub carrier_index: Arc<dyn SpatialIndex + Send>,
+    /// Radius of the carrier's neighbour queries (its blending radius), normalised units.
+    pub carrier_radius: f64,
+    /// Finest support radius of the spline, normalised units.
+    pub finest_support: f64,
+}
+
+impl RbfField {
+    fn carrier_value(&self, x: &Point3, candidates: &[u32]) -> f64 {
+        match &self.carrier {
+            Carrier::Local(l) => l.value_gradient_with(x, candidates).0,
+            c => c.value(x),
+        }
+    }
+
+    /// The spline part at `x` over the first `upto` levels of each spline.
+    fn correction_value(&self, x: &Point3, upto: usize, hits: &mut Vec<u32>) -> f64 {
+        match &self.correction {
+            Correction::Global(s) => s.value(self.kernel, x, upto, hits),
+            Correction::Blocks(blocks) => {
+                let (mut sw, mut swu) = (0.0, 0.0);
+                for b in blocks {
+                    let w = b.weight(x).0;
+                    if w > 0.0 {
+                        sw += w;
+                        swu += w * b.spline.value(self.kernel, x, upto, hits);
+                    }
+                }
+                if sw > 0.0 { swu / sw } else { 0.0 }
+            }
+        }
+    }
+
+    /// Carrier plus every level but the finest (the smooth far field).
+    fn coarse_value(&self, x: &Point3, hits: &mut Vec<u32>) -> f64 {
+        let upto = match &self.correction {
+            Correction::Global(s) => s.levels.len().saturating_sub(1),
+            Correction::Blocks(b) => b
+                .iter()
+                .map(|b| b.spline.levels.len())
+                .min()
+                .unwrap_or(1)
+                .saturating_sub(1),
+        };
+        self.carrier.value(x) + self.correction_value(x, upto, hits)
+    }
+}
+
 impl ScalarField for RbfField {
     fn value(&self, x: &Point3) -> f64 {
         let mut hits = Vec::with_capacity(64);
-        self.index.within(x, self.support, &mut hits);
-        self.value_with(x, &hits)
+        let v = self.correction_value(x, usize::MAX, &mut hits);
+        self.carrier_index.within(x, self.carrier_radius, &mut hits);
+        v + self.carrier_value(x, &hits)
     }
 
     fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        out.fill(0.0);
+        match &self.correction {
+            Correction::Global(s) => s.add_values_in(self.kernel, region, points, out),
+            Correction::Blocks(blocks) => {
+                let mut sw = vec![0.0; points.len()];
+                let mut u = vec![0.0; points.len()];
+                for b in blocks.iter().filter(|b| b.outer.intersects(region)) {
+                    u.fill(0.0);
+                    b.spline.add_values_in(self.kernel, region, points, &mut u);
+                    for (k, p) in points.iter().enumerate() {
+                        let w = b.weight(p).0;
+                        sw[k] += w;
+                        out[k] += w * u[k];
+                    }
+                }
+                for (o, w) in out.iter_mut().zip(&sw) {
+                    *o = if *w > 0.0 { *o / w } else { 0.0 };
+                }
+            }
+        }
         let mut hits = Vec::with_capacity(256);
-        self.index.within(
-            &region.center(),
-            0.5 * region.diagonal() + self.support,
-            &mut hits,
-        );
+        let (c, half) = (region.center(), 0.5 * region.diagonal());
+        self.carrier_index
+            .within(&c, half + self.carrier_radius, &mut hits);
         for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o = self.value_with(p, &hits);
+            *o += self.carrier_value(p, &hits);
         }
     }
 
     fn gradient(&self, x: &Point3) -> Point3 {
         let mut hits = Vec::with_capacity(64);
-        self.index.within(x, self.support, &mut hits);
+        self.carrier_index.within(x, self.carrier_radius, &mut hits);
         let mut g = match &self.carrier {
             Carrier::Local(l) => l.value_gradient_with(x, &hits).1,
             c => c.gradient(x),
         };
-        if let Some(v) = self.polynomial {
-            for k in 0..3 {
-                g[k] += v[k + 1];
-            }
-        }
-        let inv_r = 1.0 / self.support;
-        for &i in &hits {
-            let c = self.centres[i as usize];
-            let r = dist2(*x, c).sqrt() * inv_r;
-            let s = self.weights[i as usize] * self.kernel.derivative_over_r(r) * inv_r * inv_r;
-            let d = sub(*x, c);
-            for k in 0..3 {
-                g[k] += s * d[k];
-            }
+        let gu = match &self.correction {
+            Correction::Global(s) => s.value_gradient(self.kernel, x, &mut hits).1,
+            Correction::Blocks(blocks) => blended_gradient(blocks, self.kernel, x, &mut hits),
+        };
+        for k in 0..3 {
+            g[k] += gu[k];
         }
         g
     }
 
-    /// Active when some centre's support reaches the cell; elsewhere `f = g + p`, decided by the
-    /// carrier: a Lipschitz bound for the analytic carriers, sign changes or a small value at the
-    /// 8 corners and the centre for the local carrier.
+    /// Active when a data point's support reaches the cell; elsewhere the field is the carrier
+    /// and the coarser levels, decided by a Lipschitz bound for a single-level global field with an
+    /// analytic carrier, else by sign changes or a value below the cell's half diagonal at the 8
+    /// corners and the centre (every point of the cell is within ~0.58 half diagonals of one of
+    /// them, so a zero is caught wherever the far field's slope is below ~1.7; the local carrier
+    /// is a distance, slope 1).
     fn may_contain_zero(&self, cell: &Aabb) -> bool {
         let c = cell.center();
         let half = 0.5 * cell.diagonal();
         let mut nn = Vec::with_capacity(1);
-        self.index.nearest_k(&c, 1, &mut nn);
-        if nn.first().is_some_and(|&(_, d)| d <= self.support + half) {
+        self.carrier_index.nearest_k(&c, 1, &mut nn);
+        if nn
+            .first()
+            .is_some_and(|&(_, d)| d <= self.finest_support + half)
+        {
             return true;
         }
-        let far = |x: &Point3| self.carrier.value(x) + self.poly_value(x);
-        if let Some(l) = self.carrier.lipschitz() {
-            return far(&c).abs() <= (l + self.poly_gradient_norm()) * half;
+        if let (Correction::Global(s), Some(l)) = (&self.correction, self.carrier.lipschitz())
+            && s.levels.len() <= 1
+        {
+            let far = self.carrier.value(&c) + s.poly_value(&c);
+            return far.abs() <= (l + s.poly_gradient_norm()) * half;
         }
-        let mut samples = vec![far(&c)];
-        samples.extend(cell.corners().iter().map(far));
+        let mut hits = Vec::new();
+        let mut samples = vec![self.coarse_value(&c, &mut hits)];
+        samples.extend(
+            cell.corners()
+                .iter()
+                .map(|p| self.coarse_value(p, &mut hits)),
+        );
         let pos = samples.iter().filter(|v| **v > 0.0).count();
-        pos != 0 && pos != samples.len() || samples.iter().any(|v| v.abs() <= 0.5 * half)
+        pos != 0 && pos != samples.len() || samples.iter().any(|v| v.abs() <= half)
     }
+}
+
+/// `∇(Σ w_b U_b / Σ w_b) = (Σ (∇w_b U_b + w_b ∇U_b) − Ū Σ ∇w_b) / Σ w_b` with `Ū` the blend.
+fn blended_gradient(
+    blocks: &[PouBlock],
+    kernel: Kernel,
+    x: &Point3,
+    hits: &mut Vec<u32>,
+) -> Point3 {
+    let (mut sw, mut swu) = (0.0, 0.0);
+    let (mut sdw, mut sdwu, mut swdu) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+    for b in blocks {
+        let (w, dw) = b.weight(x);
+        if w <= 0.0 {
+            continue;
+        }
+        let (u, du) = b.spline.value_gradient(kernel, x, hits);
+        sw += w;
+        swu += w * u;
+        for k in 0..3 {
+            sdw[k] += dw[k];
+            sdwu[k] += dw[k] * u;
+            swdu[k] += w * du[k];
+        }
+    }
+    if sw <= 0.0 {
+        return [0.0; 3];
+    }
+    let ubar = swu / sw;
+    [0, 1, 2].map(|k| (sdwu[k] + swdu[k] - ubar * sdw[k]) / sw)
 }

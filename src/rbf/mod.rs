@@ -7,12 +7,16 @@ pub mod assemble;
 pub mod carrier;
 pub mod field;
 pub mod kernel;
+pub mod levels;
+pub mod pou;
 pub mod support;
 
 pub use assemble::assemble_matrix;
 pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, fit_carrier};
-pub use field::RbfField;
+pub use field::{Correction, RbfField, Spline, SplineLevel};
 pub use kernel::Kernel;
+pub use levels::{LevelPlan, plan_levels};
+pub use pou::{BlockPlan, Blocks, PouBlock, plan_blocks};
 pub use support::{Support, SupportEstimate, estimate_support};
 
 /// Errors of the RBF stages (support choice, assembly).

@@ -81,6 +81,12 @@ const STAGES: [(&str, f64); 11] = [
 ];
 
 fn overall(stage: &str, fraction: f64) -> Option<f64> {
+    if stage == "blocks" {
+        // A block decomposition runs assemble..solve once per block: it spans those stages.
+        let start = overall("assemble", 0.0)?;
+        let end = overall("solve", 1.0)?;
+        return Some(start + (end - start) * fraction.clamp(0.0, 1.0));
+    }
     let i = STAGES.iter().position(|(s, _)| *s == stage)?;
     let before: f64 = STAGES[..i].iter().map(|(_, w)| w).sum();
     Some(before + STAGES[i].1 * fraction.clamp(0.0, 1.0))
