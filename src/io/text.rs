@@ -185,6 +185,59 @@ fn recycle<'a>(mut v: Vec<&[u8]>) -> Vec<&'a [u8]> {
     v.into_iter().map(|_| &[][..]).collect()
 }
 
+impl<'a> Sink<'a> {
+    /// An empty sink with room for `estimate` points plus 5 % (within the point and memory
+    /// limits): one allocation when the estimate holds.
+    fn new(estimate: u64, limits: &'a ReadLimits, src: &'a Path, format: PointFormat) -> Self {
+        let budget_points = [
+            points_within_budget(limits, false),
+            points_within_budget(limits, true),
+        ];
+        let cap = budget_points[0].min(limits.max_points as u64);
+        let reserve = estimate.saturating_add(estimate / 20 + 16).min(cap);
+        Sink {
+            points: Vec::with_capacity(reserve as usize),
+            normals: Vec::new(),
+            budget_points,
+            limits,
+            src,
+            fmt: format.name(),
+        }
+    }
+}
+
+/// Reads the next line (with its `\n`) into `raw`; false at the end of the data.
+fn next_line<R: BufRead>(
+    r: &mut R,
+    raw: &mut Vec<u8>,
+    line_no: usize,
+    sink: &Sink,
+) -> Result<bool, IoError> {
+    raw.clear();
+    let n = Read::take(r, MAX_LINE)
+        .read_until(b'\n', raw)
+        .map_err(|source| IoError::Read {
+            path: sink.src.to_path_buf(),
+            source,
+        })?;
+    if n as u64 == MAX_LINE && raw.last() != Some(&b'\n') {
+        return Err(sink.err(line_no, format!("line longer than {MAX_LINE} bytes")));
+    }
+    Ok(n > 0)
+}
+
+/// A PTS count line's point count against the point limit and the memory budget.
+fn check_count_line(n: u64, limits: &ReadLimits, src: &Path) -> Result<(), IoError> {
+    if n > limits.max_points as u64 {
+        return Err(IoError::TooManyPoints {
+            path: src.to_path_buf(),
+            declared: n,
+            limit: limits.max_points,
+        });
+    }
+    check_reader_memory(n, false, CountSource::Declared, limits, src)
+}
+
 /// Longest text line accepted (bytes); a longer one is a parse error, not an unbounded buffer.
 const MAX_LINE: u64 = 16 << 20;
 
@@ -197,40 +250,23 @@ pub(crate) fn read_text_points<R: BufRead>(
     limits: &ReadLimits,
     src: &Path,
 ) -> Result<PointCloud, IoError> {
-    let read_err = |source| IoError::Read {
+    let head = r.fill_buf().map_err(|source| IoError::Read {
         path: src.to_path_buf(),
         source,
-    };
-    let mut sink = Sink {
-        points: Vec::new(),
-        normals: Vec::new(),
-        budget_points: [
-            points_within_budget(limits, false),
-            points_within_budget(limits, true),
-        ],
+    })?;
+    let mut sink = Sink::new(
+        estimate_lines(head, len, |l| !l.is_empty()),
         limits,
         src,
-        fmt: format.name(),
-    };
-    let estimate = estimate_lines(r.fill_buf().map_err(read_err)?, len, |l| !l.is_empty());
-    // Reserve the estimate plus 5 %, within the limits: one allocation when the estimate holds.
-    let cap = sink.budget_points[0].min(limits.max_points as u64);
-    sink.points
-        .reserve_exact(estimate.saturating_add(estimate / 20 + 16).min(cap) as usize);
+        format,
+    );
     let mut cols: Option<Columns> = None;
     let mut first = true;
     let mut spare: Vec<&[u8]> = Vec::new();
     let mut raw = Vec::new();
     for line_no in 1.. {
-        raw.clear();
-        let n = Read::take(&mut r, MAX_LINE)
-            .read_until(b'\n', &mut raw)
-            .map_err(read_err)?;
-        if n == 0 {
+        if !next_line(&mut r, &mut raw, line_no, &sink)? {
             break;
-        }
-        if n as u64 == MAX_LINE && raw.last() != Some(&b'\n') {
-            return Err(sink.err(line_no, format!("line longer than {MAX_LINE} bytes")));
         }
         let line = raw.trim_ascii();
         if line.is_empty() || line.starts_with(b"#") {
@@ -251,14 +287,7 @@ pub(crate) fn read_text_points<R: BufRead>(
             continue;
         }
         if let Some(n) = count_line(&toks).filter(|_| is_first) {
-            if n > limits.max_points as u64 {
-                return Err(IoError::TooManyPoints {
-                    path: src.to_path_buf(),
-                    declared: n,
-                    limit: limits.max_points,
-                });
-            }
-            check_reader_memory(n, false, CountSource::Declared, limits, src)?;
+            check_count_line(n, limits, src)?;
             first = true;
             continue;
         }
