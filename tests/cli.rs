@@ -110,6 +110,36 @@ fn bad_inputs_get_one_line_errors_and_no_output() {
 }
 
 #[test]
+fn hundred_million_vertex_headers_are_refused_before_reading() {
+    let mut head = b"ply\nformat binary_little_endian 1.0\nelement vertex 100000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    head.extend_from_slice(&[0u8; 24]);
+    let p = tmp("e8.ply");
+    std::fs::write(&p, &head).unwrap();
+    // Within the memory budget (2.2 GiB of points < 8 GiB): the body-size check refuses it.
+    let start = std::time::Instant::now();
+    assert_refused(&p, &["--max-points", "200000000"], "1200000000 bytes");
+    // A 1 GiB budget cannot hold 10^8 points: refused by the pre-read memory check.
+    let out = tmp("e8.glb");
+    let r = reconstruct(
+        &p,
+        &out,
+        &["--max-points", "200000000", "--max-memory-mib", "1024"],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    for needle in [
+        "100000000 points",
+        "2289 MiB",
+        "1024 MiB",
+        "subsample",
+        "--max-memory-mib",
+    ] {
+        assert!(r.stderr.contains(needle), "no '{needle}' in {:?}", r.stderr);
+    }
+    assert_refused(&p, &["--max-memory-mib", "1024"], "memory budget");
+    assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
+}
+
+#[test]
 fn unknown_output_format_and_missing_directory_are_refused_up_front() {
     let r = reconstruct(&common::data("kitten.ply"), &tmp("out.stl"), &[]);
     assert!(r.code != 0 && r.stderr.contains("stl"), "{:?}", r.stderr);

@@ -84,6 +84,7 @@ fn parsers_survive_a_long_mutation_soak() {
     let limits = ReadLimits {
         max_points: 10_000,
         max_bytes: 1 << 20,
+        ..ReadLimits::default()
     };
     let formats = [
         PointFormat::Ply,

@@ -1,7 +1,9 @@
 //! `rbfsurf reconstruct INPUT -o OUT.{glb,ply,obj} [--report REPORT.json] [parameters]`.
 
 use super::progress::BarProgress;
-use crate::io::{MeshFormat, ReadLimits, read_point_cloud, write_atomic, write_mesh};
+use crate::io::{
+    MeshFormat, ReadLimits, peek_point_count, read_point_cloud, write_atomic, write_mesh,
+};
 use crate::params::{ReconOptions, ReconParams};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
@@ -49,10 +51,15 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
     let input = a.input.display().to_string();
     let progress = BarProgress::new(a.quiet);
     let t = Instant::now();
-    let mut limits = ReadLimits::default();
+    let mut limits = ReadLimits {
+        max_memory_mib: params.max_memory_mib,
+        ..ReadLimits::default()
+    };
     if let Some(m) = a.max_points {
         limits.max_points = m;
     }
+    // Refuse a scan whose points alone cannot fit the memory budget before reading it.
+    peek_point_count(&a.input)?.check_budget(&limits, &a.input)?;
     let cloud = read_point_cloud(&a.input, &limits)?;
     let read_s = t.elapsed().as_secs_f64();
     let mut rec = crate::reconstruct(&cloud, &params, &progress).with_context(|| input.clone())?;

@@ -98,6 +98,21 @@ pub enum IoError {
         /// The limit in force.
         limit: usize,
     },
+    /// Reading the points would need more memory than [`crate::io::ReadLimits::max_memory_mib`]
+    /// (see [`crate::io::reader_peak_mib`]); refused before the point arrays are allocated.
+    #[error("{}: {points} points ({counted}) need about {needed_mib:.0} MiB just to read, more than the memory budget of {budget_mib} MiB; subsample the scan or raise the budget (--max-memory-mib)", path.display())]
+    OverMemory {
+        /// File (or `<input>`).
+        path: PathBuf,
+        /// Number of points the estimate is for.
+        points: u64,
+        /// Where that number comes from, e.g. "declared by the file's header".
+        counted: &'static str,
+        /// Memory the reader would need, MiB.
+        needed_mib: f64,
+        /// The budget in force, MiB.
+        budget_mib: u64,
+    },
     /// The file is larger than [`crate::io::ReadLimits::max_bytes`].
     #[error("{}: {bytes} bytes, more than the limit of {limit} bytes; subsample the input or raise the size limit", path.display())]
     TooLarge {

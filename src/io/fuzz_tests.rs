@@ -36,6 +36,7 @@ fn small_limits() -> ReadLimits {
     ReadLimits {
         max_points: 10_000,
         max_bytes: 1 << 20,
+        ..ReadLimits::default()
     }
 }
 

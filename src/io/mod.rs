@@ -3,12 +3,15 @@
 //!
 //! Readers do not clean: non-finite coordinates are passed through for the `clean` stage to drop and
 //! count. Every reader is linear in the file size, bounded by [`ReadLimits`] (checked before any
-//! allocation proportional to a declared count). Writers are atomic ([`write_atomic`]): a temporary
+//! allocation proportional to a declared count). [`read_point_cloud`] streams PLY and text files
+//! (memory: the points plus a 64 KiB chunk, never the whole file); [`peek_point_count`] reads only
+//! a header or the first 64 KiB, to refuse inputs that cannot fit before reading them. Writers are atomic ([`write_atomic`]): a temporary
 //! file in the destination directory is renamed over the target only once complete.
 //!
 //! References: Turk, "The PLY polygon file format" (1994); Khronos glTF 2.0 specification (2021);
 //! Wavefront OBJ and Geomview OFF format descriptions.
 
+mod budget;
 mod error;
 mod glb;
 mod obj;
@@ -20,9 +23,10 @@ mod write;
 #[cfg(test)]
 mod fuzz_tests;
 
-use std::io::Read;
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
+pub use budget::{PointCountHint, peek_point_count, reader_peak_mib};
 pub use error::IoError;
 pub use glb::{decode_glb, encode_glb};
 pub use write::{write_atomic, write_mesh, write_points_ply};
@@ -132,6 +136,9 @@ pub struct ReadLimits {
     pub max_points: usize,
     /// Maximum file size in bytes. Default 4 GiB.
     pub max_bytes: u64,
+    /// Memory budget of the point-cloud reader itself, MiB (see [`reader_peak_mib`]): inputs
+    /// whose points (and normals) would need more are refused before allocating. Default 8192.
+    pub max_memory_mib: u64,
 }
 
 impl Default for ReadLimits {
@@ -139,6 +146,7 @@ impl Default for ReadLimits {
         ReadLimits {
             max_points: 50_000_000,
             max_bytes: 4 << 30,
+            max_memory_mib: 8192,
         }
     }
 }
@@ -160,12 +168,39 @@ pub(crate) const MEMORY_SOURCE: &str = "<input>";
 /// assert_eq!(pc.points.len(), 3);
 /// ```
 pub fn read_point_cloud(path: &Path, limits: &ReadLimits) -> Result<PointCloud, IoError> {
-    let bytes = read_limited(path, limits.max_bytes)?;
-    let format = detect_point_format(path, &bytes)?;
-    parse_point_cloud_named(&bytes, format, limits, path)
+    let (file, len) = open_limited(path, limits.max_bytes)?;
+    // `take` guards against files that grow while being read.
+    let mut r = BufReader::with_capacity(budget::READ_BUFFER_BYTES, file.take(len));
+    let head = r.fill_buf().map_err(|source| IoError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let format = detect_point_format(path, head)?;
+    if head.len() as u64 >= len && head.trim_ascii().is_empty() {
+        return Err(IoError::Empty {
+            path: path.to_path_buf(),
+            what: "file is empty".into(),
+        });
+    }
+    let pc = match format {
+        PointFormat::Ply => ply::read_ply_points(r, len, limits, path, ply::CHUNK_BYTES)?,
+        PointFormat::Xyz | PointFormat::Pts | PointFormat::Csv => {
+            text::read_text_points(r, len, format, limits, path)?
+        }
+        PointFormat::Obj => {
+            let mut bytes = Vec::with_capacity(len as usize);
+            r.read_to_end(&mut bytes).map_err(|source| IoError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            obj::read_obj_points(&bytes, limits, path)?
+        }
+    };
+    non_empty(pc, format, path)
 }
 
 /// Parses an in-memory point cloud of a known format (errors name the source `<input>`).
+/// The same streaming readers as [`read_point_cloud`] run over the slice.
 ///
 /// ```
 /// use rbfsurf::io::{parse_point_cloud, PointFormat};
@@ -186,10 +221,11 @@ fn parse_point_cloud_named(
     limits: &ReadLimits,
     src: &Path,
 ) -> Result<PointCloud, IoError> {
-    if bytes.len() as u64 > limits.max_bytes {
+    let len = bytes.len() as u64;
+    if len > limits.max_bytes {
         return Err(IoError::TooLarge {
             path: src.to_path_buf(),
-            bytes: bytes.len() as u64,
+            bytes: len,
             limit: limits.max_bytes,
         });
     }
@@ -200,12 +236,17 @@ fn parse_point_cloud_named(
         });
     }
     let pc = match format {
-        PointFormat::Ply => ply::read_ply_points(bytes, limits, src)?,
+        PointFormat::Ply => ply::read_ply_points(bytes, len, limits, src, ply::CHUNK_BYTES)?,
         PointFormat::Xyz | PointFormat::Pts | PointFormat::Csv => {
-            text::read_text_points(bytes, format, limits, src)?
+            text::read_text_points(bytes, len, format, limits, src)?
         }
         PointFormat::Obj => obj::read_obj_points(bytes, limits, src)?,
     };
+    non_empty(pc, format, src)
+}
+
+/// `Empty` when a reader found no points at all.
+fn non_empty(pc: PointCloud, format: PointFormat, src: &Path) -> Result<PointCloud, IoError> {
     if pc.points.is_empty() {
         return Err(IoError::Empty {
             path: src.to_path_buf(),
@@ -250,8 +291,9 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh, IoError> {
     }
 }
 
-/// Reads the whole file, refusing (before reading) files larger than `max_bytes`.
-fn read_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, IoError> {
+/// Opens `path` and returns it with its size in bytes; refuses files larger than `max_bytes` and
+/// empty files before reading anything.
+fn open_limited(path: &Path, max_bytes: u64) -> Result<(std::fs::File, u64), IoError> {
     let file = std::fs::File::open(path).map_err(|source| IoError::Open {
         path: path.to_path_buf(),
         source,
@@ -270,6 +312,18 @@ fn read_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, IoError> {
             limit: max_bytes,
         });
     }
+    if len == 0 {
+        return Err(IoError::Empty {
+            path: path.to_path_buf(),
+            what: "file is empty (0 bytes)".into(),
+        });
+    }
+    Ok((file, len))
+}
+
+/// Reads the whole file, refusing (before reading) files larger than `max_bytes`.
+fn read_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, IoError> {
+    let (file, len) = open_limited(path, max_bytes)?;
     let mut bytes = Vec::with_capacity(len as usize);
     // `take` guards against files that grow while being read (or report a wrong size).
     file.take(max_bytes.saturating_add(1))
@@ -398,6 +452,7 @@ mod tests {
         let small = ReadLimits {
             max_points: 10,
             max_bytes: 64,
+            ..ReadLimits::default()
         };
         let e = read_point_cloud(&big, &small).unwrap_err();
         assert!(

@@ -14,9 +14,16 @@
 //!   7 = x y z intensity r g b, 9 = x y z r g b nx ny nz is NOT guessed: name the columns).
 //! - Only the used columns are parsed; `nan` / `inf` parse to non-finite values (passed through).
 //!   A row with too few columns or a non-numeric used token is a `Parse` error with its line.
+//!
+//! Streaming: lines are read one at a time from any [`BufRead`] (a buffered file or a slice), so
+//! only the points themselves are held; the point array is reserved from an estimate made on the
+//! first 64 KiB, and rows beyond [`ReadLimits::max_points`] or the memory budget
+//! ([`ReadLimits::max_memory_mib`]) are refused as they come.
 
+use std::io::{BufRead, Read};
 use std::path::Path;
 
+use super::budget::{CountSource, check_reader_memory, estimate_lines, points_within_budget};
 use super::{IoError, PointFormat, ReadLimits};
 use crate::geometry::{Point3, PointCloud};
 
@@ -104,6 +111,8 @@ fn columns_from_header(names: &[&[u8]], fmt: &'static str, src: &Path) -> Result
 struct Sink<'a> {
     points: Vec<Point3>,
     normals: Vec<Point3>,
+    /// Most points the memory budget allows: without, with normals.
+    budget_points: [u64; 2],
     limits: &'a ReadLimits,
     src: &'a Path,
     fmt: &'static str,
@@ -135,6 +144,16 @@ impl Sink<'_> {
                 limit: self.limits.max_points,
             });
         }
+        let with_normals = c.normals.is_some();
+        let next = self.points.len() as u64 + 1;
+        if next > self.budget_points[usize::from(with_normals)] {
+            let counted = CountSource::ReadSoFar;
+            check_reader_memory(next, with_normals, counted, self.limits, self.src)?;
+        }
+        if with_normals && self.normals.capacity() < self.points.capacity() {
+            self.normals
+                .reserve_exact(self.points.capacity() - self.normals.len());
+        }
         let get = |k: usize| {
             parse_f64(toks[k]).ok_or_else(|| {
                 let t = String::from_utf8_lossy(toks[k]);
@@ -160,31 +179,101 @@ fn count_line(toks: &[&[u8]]) -> Option<u64> {
     }
 }
 
-/// Reads XYZ / PTS / CSV text as described in the module docs.
-pub(crate) fn read_text_points(
-    bytes: &[u8],
+/// Empties `v` and hands its allocation on for tokens of the next line (in-place collect).
+fn recycle<'a>(mut v: Vec<&[u8]>) -> Vec<&'a [u8]> {
+    v.clear();
+    v.into_iter().map(|_| &[][..]).collect()
+}
+
+impl<'a> Sink<'a> {
+    /// An empty sink with room for `estimate` points plus 5 % (within the point and memory
+    /// limits): one allocation when the estimate holds.
+    fn new(estimate: u64, limits: &'a ReadLimits, src: &'a Path, format: PointFormat) -> Self {
+        let budget_points = [
+            points_within_budget(limits, false),
+            points_within_budget(limits, true),
+        ];
+        let cap = budget_points[0].min(limits.max_points as u64);
+        let reserve = estimate.saturating_add(estimate / 20 + 16).min(cap);
+        Sink {
+            points: Vec::with_capacity(reserve as usize),
+            normals: Vec::new(),
+            budget_points,
+            limits,
+            src,
+            fmt: format.name(),
+        }
+    }
+}
+
+/// Reads the next line (with its `\n`) into `raw`; false at the end of the data.
+fn next_line<R: BufRead>(
+    r: &mut R,
+    raw: &mut Vec<u8>,
+    line_no: usize,
+    sink: &Sink,
+) -> Result<bool, IoError> {
+    raw.clear();
+    let n = Read::take(r, MAX_LINE)
+        .read_until(b'\n', raw)
+        .map_err(|source| IoError::Read {
+            path: sink.src.to_path_buf(),
+            source,
+        })?;
+    if n as u64 == MAX_LINE && raw.last() != Some(&b'\n') {
+        return Err(sink.err(line_no, format!("line longer than {MAX_LINE} bytes")));
+    }
+    Ok(n > 0)
+}
+
+/// A PTS count line's point count against the point limit and the memory budget.
+fn check_count_line(n: u64, limits: &ReadLimits, src: &Path) -> Result<(), IoError> {
+    if n > limits.max_points as u64 {
+        return Err(IoError::TooManyPoints {
+            path: src.to_path_buf(),
+            declared: n,
+            limit: limits.max_points,
+        });
+    }
+    check_reader_memory(n, false, CountSource::Declared, limits, src)
+}
+
+/// Longest text line accepted (bytes); a longer one is a parse error, not an unbounded buffer.
+const MAX_LINE: u64 = 16 << 20;
+
+/// Reads XYZ / PTS / CSV text as described in the module docs from `r`, whose total size is
+/// `len` bytes (used to estimate the point count from the first 64 KiB).
+pub(crate) fn read_text_points<R: BufRead>(
+    mut r: R,
+    len: u64,
     format: PointFormat,
     limits: &ReadLimits,
     src: &Path,
 ) -> Result<PointCloud, IoError> {
-    let mut sink = Sink {
-        points: Vec::new(),
-        normals: Vec::new(),
+    let head = r.fill_buf().map_err(|source| IoError::Read {
+        path: src.to_path_buf(),
+        source,
+    })?;
+    let mut sink = Sink::new(
+        estimate_lines(head, len, |l| !l.is_empty()),
         limits,
         src,
-        fmt: format.name(),
-    };
+        format,
+    );
     let mut cols: Option<Columns> = None;
     let mut first = true;
-    let mut toks: Vec<&[u8]> = Vec::new();
-    for (i, raw) in bytes.split(|&b| b == b'\n').enumerate() {
-        let line_no = i + 1;
+    let mut spare: Vec<&[u8]> = Vec::new();
+    let mut raw = Vec::new();
+    for line_no in 1.. {
+        if !next_line(&mut r, &mut raw, line_no, &sink)? {
+            break;
+        }
         let line = raw.trim_ascii();
         if line.is_empty() || line.starts_with(b"#") {
             continue;
         }
         let is_first = std::mem::replace(&mut first, false);
-        toks.clear();
+        let mut toks = recycle(std::mem::take(&mut spare));
         toks.extend(tokens(line));
         if line.starts_with(b"//") {
             if cols.is_none() && is_first {
@@ -194,18 +283,11 @@ pub(crate) fn read_text_points(
         }
         if let Some(c) = cols {
             sink.push_row(&toks, &c, line_no)?;
+            spare = recycle(toks);
             continue;
         }
         if let Some(n) = count_line(&toks).filter(|_| is_first) {
-            if n > limits.max_points as u64 {
-                return Err(IoError::TooManyPoints {
-                    path: src.to_path_buf(),
-                    declared: n,
-                    limit: limits.max_points,
-                });
-            }
-            // Reserve, bounded by what the bytes can hold (at least 6 bytes per point).
-            sink.points.reserve((n as usize).min(bytes.len() / 6));
+            check_count_line(n, limits, src)?;
             first = true;
             continue;
         }
@@ -224,6 +306,7 @@ pub(crate) fn read_text_points(
         let c = Columns::from_count(toks.len());
         cols = Some(c);
         sink.push_row(&toks, &c, line_no)?;
+        spare = recycle(toks);
     }
     let has_normals = cols.is_some_and(|c| c.normals.is_some());
     Ok(PointCloud {
@@ -279,6 +362,7 @@ mod tests {
         let limits = ReadLimits {
             max_points: 2,
             max_bytes: 1 << 20,
+            ..ReadLimits::default()
         };
         let e = parse_point_cloud(b"1000000000\n1 2 3\n", PointFormat::Pts, &limits).unwrap_err();
         assert!(
@@ -317,5 +401,31 @@ mod tests {
         );
         let e = read("# only comments\n\n", PointFormat::Xyz).unwrap_err();
         assert!(matches!(e, IoError::Empty { .. }), "{e}");
+    }
+
+    #[test]
+    fn file_stream_equals_in_memory_and_the_written_values() {
+        let mut rng = crate::geometry::synthetic::SplitMix64(11);
+        let n = 9000; // about 200 KiB: several buffer refills
+        let rows: Vec<[f64; 6]> = (0..n)
+            .map(|_| [0; 6].map(|_| rng.next_f64() * 2000.0 - 1000.0))
+            .collect();
+        let mut text = String::from("//X Y Z Nx Ny Nz\n# comment\n");
+        for r in &rows {
+            let cells: Vec<String> = r.iter().map(|v| format!("{v:e}")).collect();
+            text.push_str(&cells.join(" "));
+            text.push('\n');
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("cloud.xyz");
+        std::fs::write(&p, &text).unwrap();
+        let from_file = crate::io::read_point_cloud(&p, &ReadLimits::default()).unwrap();
+        let in_memory = read(&text, PointFormat::Xyz).unwrap();
+        let want: Vec<Point3> = rows.iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let want_n: Vec<Point3> = rows.iter().map(|r| [r[3], r[4], r[5]]).collect();
+        assert_eq!(from_file.points, want);
+        assert_eq!(from_file.normals.as_ref(), Some(&want_n));
+        assert_eq!(in_memory.points, want);
+        assert_eq!(in_memory.normals, Some(want_n));
     }
 }

@@ -463,6 +463,7 @@ impl JobManager {
         let limits = ReadLimits {
             max_points: self.cfg.max_points,
             max_bytes: self.cfg.max_upload_bytes,
+            max_memory_mib: params.max_memory_mib,
         };
         let cloud = parse_point_cloud(&bytes, format, &limits)
             .map_err(|e| JobError::Failed(ApiError::from(e).body))?;

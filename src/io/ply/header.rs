@@ -1,8 +1,11 @@
 //! PLY header parser: `ply`, `format`, `comment` / `obj_info`, `element`, scalar and list
-//! `property` lines, `end_header` (LF or CRLF). Time O(header length).
+//! `property` lines, `end_header` (LF or CRLF). [`read_header`] takes the header lines off a
+//! buffered reader (at most [`MAX_HEADER_BYTES`]) and leaves the reader at the first body byte.
+//! Time O(header length).
 //!
 //! Reference: G. Turk, "The PLY Polygon File Format" (1994).
 
+use std::io::{BufRead, Read};
 use std::path::Path;
 
 use crate::io::IoError;
@@ -120,7 +123,6 @@ impl Element {
 pub(super) struct Header {
     pub(super) encoding: Encoding,
     pub(super) elements: Vec<Element>,
-    pub(super) body_start: usize,
     /// 1-based line number of the first body line (for ASCII error messages).
     pub(super) body_line: usize,
 }
@@ -132,6 +134,38 @@ pub(super) fn parse_err(src: &Path, line: usize, message: String) -> IoError {
         line,
         message,
     }
+}
+
+/// Longest header read before giving up (bytes): a file without `end_header` is not read whole.
+pub(crate) const MAX_HEADER_BYTES: u64 = 16 << 20;
+
+/// Reads the header lines (through `end_header`) from `r` and parses them; returns the header and
+/// its length in bytes. `r` is left at the first body byte. Reads at most [`MAX_HEADER_BYTES`].
+pub(crate) fn read_header<R: BufRead>(r: &mut R, src: &Path) -> Result<(Header, u64), IoError> {
+    let mut bytes = Vec::new();
+    let mut line_no = 0usize;
+    loop {
+        let room = MAX_HEADER_BYTES.saturating_sub(bytes.len() as u64);
+        let start = bytes.len();
+        let n = Read::take(&mut *r, room)
+            .read_until(b'\n', &mut bytes)
+            .map_err(|source| IoError::Read {
+                path: src.to_path_buf(),
+                source,
+            })?;
+        line_no += 1;
+        let key = bytes[start..]
+            .split(|b| b.is_ascii_whitespace())
+            .find(|t| !t.is_empty());
+        // Stop at `end_header`, at the data's end, at the size cap, or after a first line that is
+        // not `ply` (the parser reports each of these).
+        let not_ply = line_no == 1 && key != Some(b"ply".as_slice());
+        if n == 0 || key == Some(b"end_header".as_slice()) || not_ply || n as u64 >= room {
+            break;
+        }
+    }
+    let h = parse_header(&bytes, src)?;
+    Ok((h, bytes.len() as u64))
 }
 
 /// Parses the header up to and including `end_header`.
@@ -174,7 +208,6 @@ pub(super) fn parse_header(bytes: &[u8], src: &Path) -> Result<Header, IoError> 
                 return Ok(Header {
                     encoding,
                     elements,
-                    body_start: end.saturating_add(1).min(bytes.len()),
                     body_line: line_no + 1,
                 });
             }

@@ -163,6 +163,7 @@ async fn check_cloud(
     let limits = ReadLimits {
         max_points: cfg.max_points,
         max_bytes: cfg.max_upload_bytes,
+        max_memory_mib: params.max_memory_mib,
     };
     let clean = params.clean;
     tokio::task::spawn_blocking(move || {
