@@ -248,3 +248,102 @@ fn compare_reports_json_with_the_contract_keys() {
     }
     assert!(v["chamfer_rel"].as_f64().unwrap() < 2e-3, "{v}");
 }
+
+fn generate(shape: &str, points: usize, extra: &[&str], out: &Path) {
+    let o = bin()
+        .args(["generate", shape, "--points", &points.to_string(), "-o"])
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn read_points(p: &Path) -> rbfsurf::geometry::PointCloud {
+    rbfsurf::io::read_point_cloud(p, &rbfsurf::io::ReadLimits::default()).unwrap()
+}
+
+#[test]
+fn generate_writes_noisy_points_and_a_closed_truth_mesh_of_the_right_genus() {
+    use rbfsurf::geometry::synthetic::Shape;
+    for (shape, genus) in [("knot", 1), ("bumpy-sphere", 0)] {
+        let (out, truth) = (
+            tmp(&format!("{shape}.ply")),
+            tmp(&format!("{shape}-truth.ply")),
+        );
+        generate(
+            shape,
+            5000,
+            &["--noise", "0.004", "--truth", truth.to_str().unwrap()],
+            &out,
+        );
+        let cloud = read_points(&out);
+        assert_eq!(cloud.points.len(), 5000);
+        assert!(cloud.normals.is_some());
+        let mesh = rbfsurf::io::read_mesh(&truth).unwrap();
+        assert!(mesh.triangles.len() >= 400_000, "{}", mesh.triangles.len());
+        let t = rbfsurf::mesh::analyze(&mesh);
+        assert!(t.watertight && t.manifold && t.oriented, "{shape}: {t:?}");
+        assert_eq!((t.components, t.genus), (1, Some(genus)), "{shape}");
+        // Noise σ = 0.004 D along random directions: the normal component has RMS σ/√3
+        // (the knot's distance is exact; the bumpy sphere's is first-order, still good to a few %).
+        let s = Shape::by_name(shape).unwrap();
+        let d = rbfsurf::geometry::Aabb::from_points(&s.sample(5000, 1).points).diagonal();
+        let rms = (cloud
+            .points
+            .iter()
+            .map(|p| s.signed_distance(p).powi(2))
+            .sum::<f64>()
+            / 5000.0)
+            .sqrt();
+        let want = 0.004 * d / 3f64.sqrt();
+        assert!(
+            (rms / want - 1.0).abs() < 0.08,
+            "{shape}: rms {rms} vs {want}"
+        );
+    }
+}
+
+#[test]
+fn generate_outliers_holes_open_and_no_normals() {
+    use rbfsurf::geometry::synthetic::Shape;
+    let sphere = Shape::by_name("sphere").unwrap();
+    let out = tmp("sphere-outliers.ply");
+    generate("sphere", 4000, &["--outliers", "0.05"], &out);
+    let c = read_points(&out);
+    assert_eq!(c.points.len(), 4000);
+    // Positions are written as doubles, so the surface points are on the sphere to rounding.
+    let off = c
+        .points
+        .iter()
+        .filter(|p| sphere.signed_distance(p).abs() > 1e-9)
+        .count();
+    assert_eq!(off, 200);
+
+    let (a, b) = (tmp("holes-a.ply"), tmp("holes-b.ply"));
+    generate("torus", 10_000, &["--holes", "4", "--no-normals"], &a);
+    generate("torus", 10_000, &["--holes", "4", "--no-normals"], &b);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let c = read_points(&a);
+    assert!(c.normals.is_none());
+    // Four holes of radius ρ = 0.08 D (D = 1.21) on a torus of area 4π² · 0.3 · 0.12 = 1.42: each
+    // removes about πρ² / 1.42 = 2.1% of the points (they may overlap).
+    let removed = 10_000 - c.points.len();
+    assert!((150..=1000).contains(&removed), "{removed} removed");
+
+    let open = tmp("sphere-open.ply");
+    generate("sphere", 6000, &["--open", "--offset", "1e6"], &open);
+    let c = read_points(&open);
+    assert!(
+        (c.points.len() as f64 - 3000.0).abs() < 200.0,
+        "{}",
+        c.points.len()
+    );
+    assert!(c.points.iter().all(|p| p[2] >= 1e6 + 0.5 - 1e-9));
+    let o = bin()
+        .args(["generate", "cube", "-o"])
+        .arg(tmp("cube.ply"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("knot"));
+}

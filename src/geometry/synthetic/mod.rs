@@ -1,9 +1,21 @@
 //! Synthetic point sets with known surfaces, for tests and benchmarks: sphere, torus, two spheres,
-//! ellipsoid. Deterministic for a seed (splitmix64); area-uniform where it matters.
+//! trefoil-knot tube, bumpy sphere. Deterministic for a seed (splitmix64) and area-uniform; each shape
+//! also gives a closed, outward-oriented truth mesh ([`Shape::truth_mesh`]) and the defects of real
+//! scans can be applied to a sample ([`apply_defects`]: range-image cut, holes, noise, outliers).
+
+mod bumpy;
+mod defects;
+mod knot;
+mod truth;
+
+pub use defects::{Coverage, DefectError, DefectStats, Defects, apply_defects};
 
 use super::{Point3, PointCloud};
 
-/// A shape with an analytic signed distance (negative inside).
+/// The names [`Shape::by_name`] accepts.
+pub const SHAPE_NAMES: [&str; 5] = ["sphere", "torus", "two-spheres", "knot", "bumpy-sphere"];
+
+/// A shape with a known surface and signed distance (negative inside; see each variant for how exact).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Shape {
     /// Sphere of `radius` about `center`.
@@ -31,10 +43,34 @@ pub enum Shape {
         /// Closest distance between the two surfaces.
         gap: f64,
     },
+    /// Tube of radius `tube` around the trefoil `center + scale · c(t)`,
+    /// `c(t) = (sin t + 2 sin 2t, cos t − 2 cos 2t, −sin 3t)` centred on its bounding box (genus 1).
+    /// The tube must stay below `0.6 · scale` to avoid self-intersection. Its signed distance is the
+    /// distance to the centre line (coarse search refined by golden section) minus `tube`: exact
+    /// within the tube's reach, approximate far from it.
+    Knot {
+        /// Centre of the centre line's bounding box.
+        center: Point3,
+        /// Scale factor from trefoil units (the centre line spans 5.47 × 5.06 × 2) to output units.
+        scale: f64,
+        /// Tube radius, output units.
+        tube: f64,
+    },
+    /// Star-shaped `r(u) = radius (1 + amplitude · Y(u))` over unit directions `u` with a smooth
+    /// low-frequency bump `|Y| ≤ 1` (genus 0). Its signed distance is only the first-order
+    /// approximation `F / |∇F|` (exact sign, exact zero set).
+    BumpySphere {
+        /// Centre.
+        center: Point3,
+        /// Mean radius `R`.
+        radius: f64,
+        /// Relative bump amplitude `a` (keep `|a| < 0.5`).
+        amplitude: f64,
+    },
 }
 
 impl Shape {
-    /// Parse a command-line name: `sphere`, `torus`, `two-spheres` (unit-cube-sized defaults).
+    /// Parse a command-line name (one of [`SHAPE_NAMES`]; unit-cube-sized defaults centred at 0.5).
     pub fn by_name(name: &str) -> Option<Shape> {
         match name {
             "sphere" => Some(Shape::Sphere {
@@ -50,6 +86,16 @@ impl Shape {
                 center: [0.5; 3],
                 radius: 0.2,
                 gap: 0.1,
+            }),
+            "knot" => Some(Shape::Knot {
+                center: [0.5; 3],
+                scale: 0.14,
+                tube: 0.35 * 0.14,
+            }),
+            "bumpy-sphere" => Some(Shape::BumpySphere {
+                center: [0.5; 3],
+                radius: 0.35,
+                amplitude: 0.1,
             }),
             _ => None,
         }
@@ -84,13 +130,23 @@ impl Shape {
                 };
                 a.signed_distance(p).min(b.signed_distance(p))
             }
+            Shape::Knot {
+                center,
+                scale,
+                tube,
+            } => knot::distance_to_centre_line(p, center, scale) - tube,
+            Shape::BumpySphere {
+                center,
+                radius,
+                amplitude,
+            } => bumpy::signed_distance(p, center, radius, amplitude),
         }
     }
 
     /// Genus of the surface (sum over components).
     pub fn genus(&self) -> i64 {
         match self {
-            Shape::Torus { .. } => 1,
+            Shape::Torus { .. } | Shape::Knot { .. } => 1,
             _ => 0,
         }
     }
@@ -103,7 +159,8 @@ impl Shape {
         }
     }
 
-    /// `n` points sampled uniformly by area, with outward unit normals.
+    /// `n` points sampled uniformly by area (rejection sampling on the area element where it is not
+    /// constant), with outward unit normals; the same `seed` gives the same points.
     pub fn sample(&self, n: usize, seed: u64) -> PointCloud {
         let mut rng = SplitMix64(seed);
         let mut points = Vec::with_capacity(n);
@@ -141,6 +198,16 @@ impl Shape {
                         n,
                     )
                 }
+                Shape::Knot {
+                    center,
+                    scale,
+                    tube,
+                } => knot::sample(&mut rng, center, scale, tube),
+                Shape::BumpySphere {
+                    center,
+                    radius,
+                    amplitude,
+                } => bumpy::sample(&mut rng, center, radius, amplitude),
             };
             points.push(p);
             normals.push(nrm);
@@ -153,10 +220,7 @@ impl Shape {
 }
 
 fn sphere_point(rng: &mut SplitMix64, c: Point3, r: f64) -> (Point3, Point3) {
-    let z = 2.0 * rng.next_f64() - 1.0;
-    let t = rng.next_f64() * std::f64::consts::TAU;
-    let s = (1.0 - z * z).max(0.0).sqrt();
-    let n = [s * t.cos(), s * t.sin(), z];
+    let n = rng.next_unit_vector();
     ([c[0] + r * n[0], c[1] + r * n[1], c[2] + r * n[2]], n)
 }
 
@@ -178,6 +242,21 @@ impl SplitMix64 {
     pub fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
+
+    /// Standard normal deviate (Box–Muller, one of the pair).
+    pub fn next_gaussian(&mut self) -> f64 {
+        let u1 = 1.0 - self.next_f64(); // (0, 1], so the logarithm is finite
+        let u2 = self.next_f64();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    /// Uniformly distributed unit vector (Archimedes: uniform z, uniform azimuth).
+    pub fn next_unit_vector(&mut self) -> Point3 {
+        let z = 2.0 * self.next_f64() - 1.0;
+        let t = self.next_f64() * std::f64::consts::TAU;
+        let s = (1.0 - z * z).max(0.0).sqrt();
+        [s * t.cos(), s * t.sin(), z]
+    }
 }
 
 #[cfg(test)]
@@ -186,11 +265,15 @@ mod tests {
 
     #[test]
     fn samples_lie_on_their_surface_with_unit_normals() {
-        for name in ["sphere", "torus", "two-spheres"] {
+        for name in SHAPE_NAMES {
             let s = Shape::by_name(name).unwrap();
             let c = s.sample(2000, 7);
             for (p, n) in c.points.iter().zip(c.normals.as_ref().unwrap()) {
-                assert!(s.signed_distance(p).abs() < 1e-12, "{name}");
+                assert!(
+                    s.signed_distance(p).abs() < 1e-12,
+                    "{name}: {}",
+                    s.signed_distance(p)
+                );
                 assert!((super::super::norm(*n) - 1.0).abs() < 1e-12);
                 let out = [p[0] + 1e-4 * n[0], p[1] + 1e-4 * n[1], p[2] + 1e-4 * n[2]];
                 assert!(
