@@ -19,10 +19,10 @@ VARIANT_POINTS=100000
 # name | `rbfsurf generate` flags | extra `rbfsurf reconstruct` flag sets, ';'-separated (each set
 # is one more rbfsurf run besides the default one) | output extension
 VARIANTS=(
-  "noise0.1%|--noise 0.001|--smoothing 0.01|glb"
-  "noise0.5%|--noise 0.005|--smoothing 0.05|glb"
+  "noise0.1%|--noise 0.001|--smoothing 1;--neighbours 100 --smoothing 3|glb"
+  "noise0.5%|--noise 0.005|--neighbours 100 --smoothing 3|glb"
   "outliers5%|--outliers 0.05|--outlier-std-ratio 3;--outlier-std-ratio 3 --smoothing 0.01|glb"
-  "holes5|--holes 5||glb"
+  "holes5|--holes 5|--boundary closed|glb"
   "no-normals|--no-normals||glb"
   "offset1e6|--offset 1e6||obj"       # GLB/PLY store f32: 1e6 + x would lose the shape
 )

@@ -31,6 +31,20 @@ pub enum ReconError {
     /// Mesh post-processing failed.
     #[error(transparent)]
     Mesh(#[from] crate::mesh::optimize::OptimizeError),
+    /// The whole reconstruction would not fit the memory budget (checked before any work).
+    #[error(
+        "{points} points need about {mib:.0} MiB to reconstruct (measured ~0.45 KiB per point plus \
+         one block's system), more than the memory budget of {budget_mib} MiB; subsample the scan \
+         or raise --max-memory-mib"
+    )]
+    TooManyPoints {
+        /// Points in the input.
+        points: u64,
+        /// Estimated peak memory, MiB.
+        mib: f64,
+        /// The budget, MiB.
+        budget_mib: u64,
+    },
     /// The caller cancelled.
     #[error("cancelled")]
     Cancelled,

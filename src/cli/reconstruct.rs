@@ -59,7 +59,10 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         limits.max_points = m;
     }
     // Refuse a scan whose points alone cannot fit the memory budget before reading it.
-    peek_point_count(&a.input)?.check_budget(&limits, &a.input)?;
+    let hint = peek_point_count(&a.input)?;
+    hint.check_budget(&limits, &a.input)?;
+    crate::pipeline::check_scale(hint.points, params.max_memory_mib)
+        .with_context(|| input.clone())?;
     let cloud = read_point_cloud(&a.input, &limits)?;
     let read_s = t.elapsed().as_secs_f64();
     let mut rec = crate::reconstruct(&cloud, &params, &progress).with_context(|| input.clone())?;

@@ -560,6 +560,7 @@ fn failure_code(e: &crate::ReconError) -> &'static str {
     } else if matches!(
         e,
         crate::ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
+            | crate::ReconError::TooManyPoints { .. }
     ) {
         "system_too_large"
     } else {
