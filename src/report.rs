@@ -56,8 +56,11 @@ pub struct ParamsReport {
     pub smoothing: f64,
     /// Unsupported surface handling actually applied: `trim` or `closed`.
     pub boundary: &'static str,
-    /// Where the normals came from: `input`, `estimated` (PCA + MST orientation) or `none`.
+    /// Where the normals came from: `input`, `input-reoriented` (inconsistent input orientation made
+    /// consistent by MST propagation), `estimated` (PCA + MST orientation) or `none`.
     pub normals: &'static str,
+    /// Input normals flipped by that re-orientation.
+    pub normals_reoriented: usize,
 }
 
 /// Linear system statistics (seed Table 1 columns).

@@ -181,3 +181,50 @@ fn conjugate_gradients_give_the_direct_solution_on_the_bunny_scan() {
     // its cell, 1/64 of the box ≈ 0.01 of the diagonal); everywhere else they agree to 1e-6.
     assert!(d.chamfer_rel < 1e-6 && d.hausdorff_rel < 0.01, "{d:?}");
 }
+
+#[test]
+fn inconsistently_oriented_normals_are_reoriented_and_counted() {
+    let shape = Shape::by_name("torus").unwrap();
+    let mut cloud = shape.sample(8000, 25);
+    let normals = cloud.normals.as_mut().unwrap();
+    let mut rng = rbfsurf::geometry::synthetic::SplitMix64(9);
+    let mut flipped = 0;
+    for n in normals.iter_mut() {
+        if rng.next_f64() < 0.3 {
+            *n = [-n[0], -n[1], -n[2]];
+            flipped += 1;
+        }
+    }
+    let rec = reconstruct(&cloud, &params(Blocks::None, 1), &NoProgress).unwrap();
+    assert_eq!(rec.report.params.normals, "input-reoriented");
+    let r = rec.report.params.normals_reoriented;
+    // Either the flipped ones were turned back, or (whole orientation reversed) the others were.
+    assert!(r == flipped || r == 8000 - flipped, "{r} vs {flipped}");
+    let m = &rec.report.mesh;
+    assert!(
+        m.watertight && m.components == 1 && m.genus == Some(1),
+        "{m:?}"
+    );
+    let err = common::max_vertex_error(&rec.mesh, |p| shape.signed_distance(p));
+    assert!(err < 0.01, "max vertex error {err}");
+}
+
+#[test]
+fn a_cloud_of_pure_noise_is_reported_not_meshed_silently() {
+    let mut rng = rbfsurf::geometry::synthetic::SplitMix64(10);
+    let points = (0..4000)
+        .map(|_| [rng.next_f64(), rng.next_f64(), rng.next_f64()])
+        .collect();
+    let cloud = PointCloud {
+        points,
+        normals: None,
+    };
+    let r = reconstruct(&cloud, &params(Blocks::None, 1), &NoProgress);
+    match r {
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(msg.contains("surface"), "{msg}");
+        }
+        Ok(rec) => panic!("meshed noise: {:?}", rec.report.mesh),
+    }
+}

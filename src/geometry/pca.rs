@@ -92,6 +92,46 @@ pub fn symmetric_eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point3; 3]) {
     (vals, [col(idx[0]), col(idx[1]), col(idx[2])])
 }
 
+/// Neighbourhood sizes at which [`surface_thickness`] looks.
+const THICKNESS_SCALES: [usize; 3] = [16, 64, 256];
+
+/// How far `points` are from sampling a surface: for k = 16, 64 and 256 neighbours (found with
+/// `nearest_k`), the median over ≤ 2000 sampled points of `λ_min / (λ₀ + λ₁ + λ₂)` of the local
+/// covariance; the smallest over the scales is returned. 0 on a plane; measured ≤ 0.04 at the
+/// coarsest scale on a knot with Gaussian noise of 0.5% of the diagonal (4× its spacing), ≥ 0.17 at
+/// every scale on uniform noise in a cube. Scales above an eighth of the points are skipped (the
+/// neighbourhood would be the whole object); below 128 points the answer is 0. `O(s · k log n)`.
+pub fn surface_thickness(
+    points: &[Point3],
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+) -> f64 {
+    if points.len() < 8 * THICKNESS_SCALES[0] {
+        return 0.0;
+    }
+    let step = (points.len() / 2000).max(1);
+    let mut knn = Vec::new();
+    let mut nb = Vec::new();
+    THICKNESS_SCALES
+        .iter()
+        .filter(|&&k| 8 * k <= points.len())
+        .map(|&k| {
+            let mut ratios: Vec<f64> = (0..points.len())
+                .step_by(step)
+                .map(|i| {
+                    nearest_k(&points[i], k, &mut knn);
+                    nb.clear();
+                    nb.extend(knn.iter().map(|&(j, _)| points[j as usize]));
+                    let v = pca(&nb).variances;
+                    let total = v[0] + v[1] + v[2];
+                    if total > 0.0 { v[2] / total } else { 0.0 }
+                })
+                .collect();
+            let mid = ratios.len() / 2;
+            *ratios.select_nth_unstable_by(mid, f64::total_cmp).1
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

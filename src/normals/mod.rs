@@ -23,6 +23,57 @@ impl Default for NormalParams {
     }
 }
 
+/// Share of sampled neighbour pairs whose given normals point in strongly opposed directions
+/// (`n_i·n_j < −0.5`), over at most ~4000 points and their `k` nearest neighbours found with
+/// `nearest_k` (a point is its own first neighbour). Near 0 for consistently oriented normals on a
+/// surface sampled finer than its thickness; ~0.5 for randomly flipped ones.
+pub fn inconsistent_fraction(
+    points: &[Point3],
+    normals: &[Point3],
+    k: usize,
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+) -> f64 {
+    let step = (points.len() / 4000).max(1);
+    let (mut bad, mut total) = (0usize, 0usize);
+    let mut knn = Vec::new();
+    for i in (0..points.len()).step_by(step) {
+        nearest_k(&points[i], k + 1, &mut knn);
+        for &(j, _) in knn.iter().filter(|(j, _)| *j as usize != i) {
+            let (a, b) = (normals[i], normals[j as usize]);
+            let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            let (na, nb) = (
+                a[0] * a[0] + a[1] * a[1] + a[2] * a[2],
+                b[0] * b[0] + b[1] * b[1] + b[2] * b[2],
+            );
+            if na > 0.0 && nb > 0.0 {
+                total += 1;
+                if d < -0.5 * (na * nb).sqrt() {
+                    bad += 1;
+                }
+            }
+        }
+    }
+    bad as f64 / total.max(1) as f64
+}
+
+/// Re-orient given normals consistently (their lines kept, signs chosen by MST propagation as for
+/// estimated normals). Returns the normals and how many were flipped.
+pub fn reorient_normals(
+    points: &[Point3],
+    normals: &[Point3],
+    params: &NormalParams,
+) -> (Vec<Point3>, usize) {
+    let k = params.neighbours.clamp(3, points.len().max(3));
+    let (_, graph) = estimate_normals(points, k);
+    let oriented = orient_normals(points, normals.to_vec(), &graph);
+    let flipped = oriented
+        .iter()
+        .zip(normals)
+        .filter(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2] < 0.0)
+        .count();
+    (oriented, flipped)
+}
+
 /// Estimated, consistently oriented unit normals (outward for a closed surface sampled all round).
 pub fn estimate_oriented_normals(points: &[Point3], params: &NormalParams) -> Vec<Point3> {
     let k = params.neighbours.clamp(3, points.len().max(3));

@@ -34,6 +34,8 @@ pub fn fit_field(
     let t = Instant::now();
     let index: Arc<dyn SpatialIndex + Send> =
         Arc::from(build_index(&points, params.index, params.leaf_size)?);
+    check_surface(&points, index.as_ref())?;
+    let normals_reoriented = reorient_inconsistent_normals(&mut clean, &points, index.as_ref());
     let support = estimate_support(&points, index.as_ref(), params.support)?;
     let count = params.levels;
     // With blocks only one block's system is alive at a time (core plus overlap: ~1.5× its core).
@@ -104,7 +106,52 @@ pub fn fit_field(
         residual,
         normals_flipped,
         normals_estimated,
+        normals_reoriented,
     })
+}
+
+/// Local thickness (see [`crate::geometry::pca::surface_thickness`]) above which the points are
+/// taken for noise filling a volume rather than a sampled surface.
+const MAX_SURFACE_THICKNESS: f64 = 0.12;
+
+/// Refuse a cloud that fills a volume at every scale (pure noise) instead of meshing blobs.
+fn check_surface(points: &[Point3], index: &dyn SpatialIndex) -> Result<(), ReconError> {
+    let thickness =
+        crate::geometry::pca::surface_thickness(points, |p, k, out| index.nearest_k(p, k, out));
+    if thickness > MAX_SURFACE_THICKNESS {
+        return Err(crate::geometry::clean::InputError::NotASurface {
+            n: points.len(),
+            thickness,
+        }
+        .into());
+    }
+    Ok(())
+}
+
+/// Share of opposed neighbour normals above which the input's normals count as inconsistent.
+const INCONSISTENT_NORMALS: f64 = 0.05;
+
+/// When the input's normals are inconsistently oriented (more than 5% of sampled neighbour pairs
+/// opposed), orient them by MST propagation before the carrier uses them. Returns how many were
+/// flipped (0 when they were consistent or absent).
+fn reorient_inconsistent_normals(
+    clean: &mut PointCloud,
+    points: &[Point3],
+    index: &dyn SpatialIndex,
+) -> usize {
+    let Some(normals) = clean.normals.as_ref() else {
+        return 0;
+    };
+    let share = crate::normals::inconsistent_fraction(points, normals, 8, |p, k, out| {
+        index.nearest_k(p, k, out)
+    });
+    if share <= INCONSISTENT_NORMALS {
+        return 0;
+    }
+    let (oriented, flipped) =
+        crate::normals::reorient_normals(points, normals, &NormalParams::default());
+    clean.normals = Some(oriented);
+    flipped
 }
 
 /// Fit the planned levels coarse to fine: level `l` interpolates `target`, what the carrier and the

@@ -73,5 +73,6 @@ pub(super) fn fit_global(
         residual,
         normals_flipped: false,
         normals_estimated: false,
+        normals_reoriented: 0,
     })
 }

@@ -56,6 +56,8 @@ pub struct FittedField {
     pub normals_flipped: bool,
     /// Whether normals were estimated (the input had none).
     pub normals_estimated: bool,
+    /// Input normals flipped to make an inconsistent orientation consistent (0 = none).
+    pub normals_reoriented: usize,
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
@@ -227,8 +229,11 @@ fn params_report(
         normals_flipped: fit.normals_flipped,
         smoothing: params.smoothing,
         boundary: if trim { "trim" } else { "closed" },
+        normals_reoriented: fit.normals_reoriented,
         normals: if fit.normals_estimated {
             "estimated"
+        } else if fit.normals_reoriented > 0 {
+            "input-reoriented"
         } else if fit.clean.has_normals {
             "input"
         } else {
