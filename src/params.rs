@@ -339,9 +339,9 @@ pub struct ReconOptions {
     #[arg(long)]
     #[serde(default)]
     pub merge_tolerance: Option<f64>,
-    /// Memory budget for matrix + factor in MiB (default 8192); bigger systems are refused up front.
-    #[arg(long)]
-    #[serde(default)]
+    /// Memory budget in MiB (default 8192; alias --max-memory): inputs whose reconstruction would not fit are refused before reading, systems whose matrix or factor would not fit before allocating.
+    #[arg(long, visible_alias = "max-memory")]
+    #[serde(default, alias = "max-memory")]
     pub max_memory_mib: Option<u64>,
     /// Smoothing λ on the matrix diagonal: 0 (default) interpolates; 1e-3..1e-1 for noisy scans.
     #[arg(long)]

@@ -5,6 +5,7 @@
 //! - `scaling`: N = 10k, 37,706 (bunny), 100k, 300k with default settings: per-stage times, peak RSS,
 //!   nnz, envelope vs sparse factor size and time.
 
+use super::outln;
 use crate::geometry::synthetic::{Shape, SplitMix64};
 use crate::geometry::{Aabb, Normalization, PointCloud};
 use crate::io::{MeshFormat, ReadLimits, read_point_cloud, write_mesh};
@@ -76,14 +77,14 @@ fn table1(a: &BenchArgs) -> Result<()> {
         solver: SolverKind::Envelope,
         ..Default::default()
     };
-    println!(
+    outln!(
         "Seed Table 1 (theirs: AMD Athlon 1 GHz) vs rbfsurf (this machine), min of {} runs\n",
         a.repeat
     );
-    println!(
+    outln!(
         "| quantity | Head (theirs) | bunny 1,487 (ours) | Seashell (theirs) | bunny 915 (ours) |"
     );
-    println!("|---|---|---|---|---|");
+    outln!("|---|---|---|---|---|");
     let mut rows: Vec<[String; 2]> = Vec::new();
     for n in [1487usize, 915] {
         let sub = random_subset(&bunny, n, 2026);
@@ -157,7 +158,7 @@ fn table1(a: &BenchArgs) -> Result<()> {
     ];
     let ours = |case: usize, row: usize| -> String { rows[case * 3 + row / 2][row % 2].clone() };
     for (row, name) in names.iter().enumerate() {
-        println!(
+        outln!(
             "| {name} | {} | {} | {} | {} |",
             theirs[row][0],
             ours(0, row),
@@ -177,14 +178,14 @@ fn reset_peak_rss() {
 }
 
 fn scaling(a: &BenchArgs) -> Result<()> {
-    println!(
+    outln!(
         "Scaling with default parameters (min of {} runs for times; peak RSS of the last run)\n",
         a.repeat
     );
-    println!(
+    outln!(
         "| N | input | clean | index | carrier | assemble | order | factor | solve | polygonize | post | write GLB | total | peak RSS MiB | nnz(A) | triangles | genus |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    outln!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut solver_rows = Vec::new();
     for &n in &a.sizes {
         let (cloud, label) = if n == 37_706 && a.bunny.exists() {
@@ -221,7 +222,7 @@ fn scaling(a: &BenchArgs) -> Result<()> {
         }
         let r = best.expect("one run");
         let t = &r.timings_s;
-        println!(
+        outln!(
             "| {n} | {label} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | **{:.2}** | {:.0} | {} | {} | {} |",
             t.clean,
             t.index,
@@ -241,15 +242,15 @@ fn scaling(a: &BenchArgs) -> Result<()> {
         );
         solver_rows.push(solver_comparison(&cloud, n, &r)?);
     }
-    println!(
+    outln!(
         "\nEnvelope (own Jennings profile Cholesky, BFS ordering) vs sparse (faer supernodal, AMD), same matrix\n"
     );
-    println!(
+    outln!(
         "| N | envelope values | sparse factor values | ratio | envelope factor+solve s | sparse factor+solve s | ratio |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    outln!("|---|---|---|---|---|---|---|");
     for row in solver_rows {
-        println!("{row}");
+        outln!("{row}");
     }
     Ok(())
 }

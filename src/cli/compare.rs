@@ -1,5 +1,6 @@
 //! `rbfsurf compare MESH REFERENCE [--samples N] [--json]`.
 
+use super::outln;
 use crate::io::{ReadLimits, read_mesh, read_point_cloud};
 use crate::mesh::compare::{CompareParams, Reference, compare};
 use crate::mesh::topology::analyze;
@@ -49,15 +50,17 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             "mesh_to_ref_mean_rel": r.mesh_to_ref_mean_rel, "ref_to_mesh_mean_rel": r.ref_to_mesh_mean_rel,
             "samples": r.samples, "mesh": mesh_topo, "reference": ref_topo,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        println!(
+        outln!(
             "chamfer_rel   {:.3e}  (mean of {:.3e} mesh→ref and {:.3e} ref→mesh)",
-            r.chamfer_rel, r.mesh_to_ref_mean_rel, r.ref_to_mesh_mean_rel
+            r.chamfer_rel,
+            r.mesh_to_ref_mean_rel,
+            r.ref_to_mesh_mean_rel
         );
-        println!("hausdorff_rel {:.3e}", r.hausdorff_rel);
-        println!("samples       {}", r.samples);
-        println!(
+        outln!("hausdorff_rel {:.3e}", r.hausdorff_rel);
+        outln!("samples       {}", r.samples);
+        outln!(
             "mesh          {} vertices, {} triangles, {} component(s), watertight {}, genus {:?}",
             mesh_topo.vertices,
             mesh_topo.triangles,

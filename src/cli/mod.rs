@@ -13,6 +13,27 @@ mod submit;
 
 use clap::{Parser, Subcommand};
 
+/// `println!` for command output that a closed pipe (`rbfsurf compare … | head -1`) ends quietly
+/// with exit code 0 instead of a panic; other stdout errors are reported on stderr with exit 1.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($arg)*) {
+            $crate::cli::stdout_failed(e);
+        }
+    }};
+}
+pub(crate) use outln;
+
+/// Exit on a failed write to stdout: quietly for a closed pipe, with a message otherwise.
+pub(crate) fn stdout_failed(e: std::io::Error) -> ! {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(0);
+    }
+    eprintln!("rbfsurf: error: writing to standard output: {e}");
+    std::process::exit(1);
+}
+
 /// rbfsurf: watertight meshes from point clouds with compactly supported RBFs.
 #[derive(Debug, Parser)]
 #[command(name = "rbfsurf", version, about)]

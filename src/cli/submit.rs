@@ -3,6 +3,7 @@
 //! the job, downloads the mesh. Exits non-zero when anything fails (for CI).
 
 use super::http::{BaseUrl, HttpResponse, request};
+use super::outln;
 use crate::io::{MeshFormat, PointFormat, write_atomic};
 use crate::params::{ReconOptions, ReconParams};
 use anyhow::{Context, Result, bail};
@@ -102,7 +103,7 @@ pub fn run(a: &SubmitArgs) -> Result<()> {
         .to_string();
     eprintln!("job {id} accepted ({} points)", job["input"]["points"]);
     if !(a.wait || a.output.is_some() || a.report.is_some()) {
-        println!("{id}");
+        outln!("{id}");
         return Ok(());
     }
     let job = wait_job(&base, &id, &headers, Duration::from_secs(a.timeout_s))?;
@@ -128,7 +129,7 @@ pub fn run(a: &SubmitArgs) -> Result<()> {
     if a.require_watertight && !(mesh["watertight"] == true && mesh["manifold"] == true) {
         bail!("job {id}: the mesh is not watertight and manifold (--require-watertight)");
     }
-    println!("{id}");
+    outln!("{id}");
     Ok(())
 }
 

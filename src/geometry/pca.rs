@@ -135,7 +135,34 @@ pub fn surface_thickness(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{cross, dot, norm};
+    use crate::geometry::synthetic::{Shape, SplitMix64};
+    use crate::geometry::{cross, dist2, dot, norm};
+
+    fn brute_knn(points: &[Point3]) -> impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + '_ {
+        move |p, k, out| {
+            out.clear();
+            out.extend((0..points.len() as u32).map(|j| (j, dist2(*p, points[j as usize]).sqrt())));
+            out.sort_by(|a, b| a.1.total_cmp(&b.1));
+            out.truncate(k);
+        }
+    }
+
+    #[test]
+    fn thickness_separates_surfaces_from_volume_noise() {
+        let sphere = Shape::by_name("sphere").unwrap().sample(3000, 1).points;
+        let t = surface_thickness(&sphere, brute_knn(&sphere));
+        assert!(t < 0.02, "sphere {t}");
+        let mut rng = SplitMix64(2);
+        let cube: Vec<Point3> = (0..3000)
+            .map(|_| [rng.next_f64(), rng.next_f64(), rng.next_f64()])
+            .collect();
+        let t = surface_thickness(&cube, brute_knn(&cube));
+        assert!(t > 0.15, "cube {t}");
+        assert_eq!(
+            surface_thickness(&cube[..100], brute_knn(&cube[..100])),
+            0.0
+        );
+    }
 
     #[test]
     fn eigen_decomposition_reconstructs_the_matrix() {
