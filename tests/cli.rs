@@ -98,7 +98,7 @@ fn bad_inputs_get_one_line_errors_and_no_output() {
     assert_refused(&w("huge.ply", huge), &[], "1000000000");
     assert_refused(
         &common::data("bunny_cgal_10k.ply"),
-        &["--support", "1.5", "--max-memory-mib", "64"],
+        &["--support", "1.5", "--max-memory-mib", "256"],
         "MiB",
     );
     assert_refused(&common::data("kitten.ply"), &["--support", "-1"], "support");

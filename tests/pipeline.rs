@@ -165,7 +165,8 @@ fn oversized_support_is_refused_before_allocating() {
     let cloud = Shape::by_name("sphere").unwrap().sample(20_000, 1);
     let p = ReconParams {
         support: Support::Radius(1.5),
-        max_memory_mib: 64,
+        // Enough for 20,000 points (~132 MiB estimated), far from enough for a dense 20,000² system.
+        max_memory_mib: 512,
         ..Default::default()
     };
     let err = reconstruct(&cloud, &p, &NoProgress)

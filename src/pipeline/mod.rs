@@ -77,13 +77,13 @@ pub fn reconstruct(
 }
 
 /// Estimated peak resident memory (MiB) of a CSRBF reconstruction of `points` points with the
-/// default parameters: 100 MiB of fixed cost, ~460 bytes per point for the points, normals,
+/// default parameters: 64 MiB of fixed cost (the mesh, bounded by the grid resolution cap), ~460 bytes per point for the points, normals,
 /// indices, carrier and offsets, and ~1230 bytes per point of the largest system alive at once
 /// (one block of at most 250,000 core points plus overlap). Calibrated on measured runs: 10⁶ torus
-/// points peaked at 882 MiB (estimate 980).
+/// points peaked at 815–902 MiB (estimate 944), 10⁴ at 63–76 MiB (estimate 80).
 pub fn estimated_peak_mib(points: u64) -> f64 {
     let alive = points.min(375_000);
-    100.0 + (points as f64 * 460.0 + alive as f64 * 1230.0) / (1u64 << 20) as f64
+    64.0 + (points as f64 * 460.0 + alive as f64 * 1230.0) / (1u64 << 20) as f64
 }
 
 /// Refuse, before any work, a cloud whose reconstruction would not fit the budget.
