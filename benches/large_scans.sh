@@ -20,8 +20,8 @@ VARIANT_POINTS=100000
 # is one more rbfsurf run besides the default one) | output extension
 VARIANTS=(
   "noise0.1%|--noise 0.001|--smoothing 1;--neighbours 100 --smoothing 3|glb"
-  "noise0.5%|--noise 0.005|--neighbours 100 --smoothing 3|glb"
-  "outliers5%|--outliers 0.05|--outlier-std-ratio 3;--outlier-std-ratio 3 --smoothing 0.01|glb"
+  "noise0.5%|--noise 0.005|--neighbours 100 --smoothing 3;--neighbours 100 --smoothing 3 --min-component 0.01|glb"
+  "outliers5%|--outliers 0.05|--outlier-std-ratio 3;--outlier-std-ratio 3 --min-component 0.01|glb"
   "holes5|--holes 5|--boundary closed|glb"
   "no-normals|--no-normals||glb"
   "offset1e6|--offset 1e6||obj"       # GLB/PLY store f32: 1e6 + x would lose the shape

@@ -156,6 +156,9 @@ pub struct ReconParams {
     /// Block decomposition with a partition of unity (default `auto`: one system up to 250,000
     /// points, blocks of at most 250,000 points above).
     pub blocks: crate::rbf::Blocks,
+    /// Drop connected components with fewer triangles than this fraction of the largest one
+    /// (default 0 = keep every component; 0.01 removes floaters left by noise and outliers).
+    pub min_component: f64,
 }
 
 impl Default for ReconParams {
@@ -178,6 +181,7 @@ impl Default for ReconParams {
             boundary: Boundary::Auto,
             levels: 1,
             blocks: crate::rbf::Blocks::Auto,
+            min_component: 0.0,
         }
     }
 }
@@ -251,6 +255,13 @@ impl ReconParams {
                 "outlier-std-ratio",
                 o.std_ratio.to_string(),
                 "a positive number (e.g. 2.5)",
+            );
+        }
+        if !(self.min_component.is_finite() && (0.0..=1.0).contains(&self.min_component)) {
+            return err(
+                "min-component",
+                self.min_component.to_string(),
+                "a fraction of the largest component in [0, 1]",
             );
         }
         if !(1..=8).contains(&self.levels) {
@@ -365,6 +376,10 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[param(value_type = Option<String>)]
     pub blocks: Option<crate::rbf::Blocks>,
+    /// Drop connected components with fewer triangles than this fraction of the largest (0 = keep all, the default; 0.01 removes floaters from noise and outliers).
+    #[arg(long)]
+    #[serde(default)]
+    pub min_component: Option<f64>,
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -401,6 +416,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             boundary: a.boundary.unwrap_or(d.boundary),
             levels: a.levels.unwrap_or(d.levels),
             blocks: a.blocks.unwrap_or(d.blocks),
+            min_component: a.min_component.unwrap_or(d.min_component),
         };
         p.validate()?;
         Ok(p)

@@ -168,6 +168,10 @@ pub struct PolygonizeReport {
     pub field_evaluations: u64,
     /// Triangles dropped because no data point is within the support radius (open scans).
     pub trimmed_triangles: usize,
+    /// Connected components dropped by `--min-component` (floaters).
+    pub small_components_removed: usize,
+    /// Triangles in those components.
+    pub small_component_triangles: usize,
     /// Grid cell edge, normalised units.
     pub cell_size: f64,
 }

@@ -85,6 +85,32 @@ impl UnionFind {
     }
 }
 
+/// Per triangle, the index of its connected component (triangles sharing a vertex are connected),
+/// and the triangle count of each component. `O(t α(t))`.
+pub fn triangle_components(mesh: &TriMesh) -> (Vec<u32>, Vec<usize>) {
+    let mut uf = UnionFind::new(mesh.vertices.len());
+    for t in &mesh.triangles {
+        uf.union(t[0], t[1]);
+        uf.union(t[1], t[2]);
+    }
+    let mut id = vec![u32::MAX; mesh.vertices.len()];
+    let mut sizes = Vec::new();
+    let labels = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let root = uf.find(t[0]) as usize;
+            if id[root] == u32::MAX {
+                id[root] = sizes.len() as u32;
+                sizes.push(0);
+            }
+            sizes[id[root] as usize] += 1;
+            id[root]
+        })
+        .collect();
+    (labels, sizes)
+}
+
 /// One undirected edge with its use counts in each direction.
 struct EdgeUse {
     lo: u32,

@@ -126,6 +126,9 @@ fn reconstruct_inner(
     };
     let (mut mesh, stats) = polygonize(fit.field.as_ref(), &domain, &pp, progress)?;
     let (trim, trimmed_triangles) = trim_unsupported(&mut mesh, &fit, params.boundary);
+    let (flagged, small_components_removed) =
+        crate::mesh::trim::small_components(&mesh, params.min_component);
+    let small_component_triangles = crate::mesh::trim::remove_triangles(&mut mesh, &flagged);
     timings.polygonize = t.elapsed().as_secs_f64();
     progress.stage("post");
     let t = Instant::now();
@@ -152,6 +155,8 @@ fn reconstruct_inner(
             blocks_active: stats.blocks_active,
             field_evaluations: stats.field_evaluations,
             trimmed_triangles,
+            small_components_removed,
+            small_component_triangles,
             cell_size: domain.extent().iter().fold(0.0f64, |a, &b| a.max(b))
                 / grid_resolution as f64,
         },
