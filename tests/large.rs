@@ -234,14 +234,21 @@ fn min_component_drops_floaters_and_keeps_equal_parts() {
     let shape = Shape::by_name("two-spheres").unwrap();
     let mut cloud = shape.sample(6000, 26);
     // Three tiny spheres (radius 0.02) of 80 points each, away from the two big ones.
-    for (k, c) in [[0.5, 0.5, 0.9], [0.1, 0.9, 0.5], [0.9, 0.1, 0.1]].iter().enumerate() {
+    for (k, c) in [[0.5, 0.5, 0.9], [0.1, 0.9, 0.5], [0.9, 0.1, 0.1]]
+        .iter()
+        .enumerate()
+    {
         let tiny = Shape::Sphere {
             center: *c,
             radius: 0.02,
         }
         .sample(80, 30 + k as u64);
         cloud.points.extend(tiny.points);
-        cloud.normals.as_mut().unwrap().extend(tiny.normals.unwrap());
+        cloud
+            .normals
+            .as_mut()
+            .unwrap()
+            .extend(tiny.normals.unwrap());
     }
     let keep = reconstruct(&cloud, &params(Blocks::None, 1), &NoProgress).unwrap();
     assert_eq!(keep.report.mesh.components, 5, "{:?}", keep.report.mesh);
@@ -251,7 +258,10 @@ fn min_component_drops_floaters_and_keeps_equal_parts() {
     };
     let drop = reconstruct(&cloud, &p, &NoProgress).unwrap();
     let m = &drop.report.mesh;
-    assert!(m.components == 2 && m.watertight && m.genus == Some(0), "{m:?}");
+    assert!(
+        m.components == 2 && m.watertight && m.genus == Some(0),
+        "{m:?}"
+    );
     assert_eq!(drop.report.polygonize.small_components_removed, 3);
     assert!(drop.report.polygonize.small_component_triangles > 0);
 }

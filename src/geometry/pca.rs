@@ -96,7 +96,7 @@ pub fn symmetric_eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [Point3; 3]) {
 const THICKNESS_SCALES: [usize; 3] = [16, 64, 256];
 
 /// How far `points` are from sampling a surface: for k = 16, 64 and 256 neighbours (found with
-/// `nearest_k`), the median over ≤ 2000 sampled points of `λ_min / (λ₀ + λ₁ + λ₂)` of the local
+/// `nearest_k`), the median over ≤ ~600 sampled points of `λ_min / (λ₀ + λ₁ + λ₂)` of the local
 /// covariance; the smallest over the scales is returned. 0 on a plane; measured ≤ 0.04 at the
 /// coarsest scale on a knot with Gaussian noise of 0.5% of the diagonal (4× its spacing), ≥ 0.17 at
 /// every scale on uniform noise in a cube. Scales above an eighth of the points are skipped (the
@@ -108,7 +108,7 @@ pub fn surface_thickness(
     if points.len() < 8 * THICKNESS_SCALES[0] {
         return 0.0;
     }
-    let step = (points.len() / 2000).max(1);
+    let step = (points.len() / 600).max(1);
     let mut knn = Vec::new();
     let mut nb = Vec::new();
     THICKNESS_SCALES
