@@ -136,7 +136,7 @@ pub struct ReconParams {
     pub solver: SolverKind,
     /// Polynomial part (default none).
     pub polynomial: Polynomial,
-    /// Marching grid cells along the longest axis; `None` chooses from the point spacing (64–400).
+    /// Marching grid cells along the longest axis; `None` chooses from the point spacing (64–200).
     pub resolution: Option<usize>,
     /// Input cleaning.
     pub clean: CleanParams,
@@ -333,7 +333,7 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[param(value_type = Option<String>)]
     pub polynomial: Option<Polynomial>,
-    /// Marching grid cells along the longest axis (default: from the point spacing, 64..320).
+    /// Marching grid cells along the longest axis (default: from the point spacing, 64..200).
     #[arg(long)]
     #[serde(default)]
     pub resolution: Option<usize>,

@@ -184,12 +184,14 @@ fn trim_unsupported(mesh: &mut TriMesh, fit: &FittedField, boundary: Boundary) -
 }
 
 /// Grid resolution from the median point spacing (normalised units): about one cell per spacing,
-/// clamped to 64..=320.
+/// clamped to 64..=200. The cap was 320 until measured: at 10⁵–10⁶ points 200 cells gave equal or
+/// lower Chamfer distance to the truth (torus 10⁵ 9.5e-6 vs 1.10e-5, bumpy sphere 6.3e-6 vs 7.7e-6,
+/// torus 10⁶ 4.9e-6 vs 5.2e-6, bunny vs bunny00 4.9e-5 vs 5.2e-5) in about half the time.
 pub fn auto_resolution(spacing: f64) -> usize {
     if !(spacing.is_finite() && spacing > 0.0) {
         return 128;
     }
-    ((1.0 / spacing).ceil() as usize).clamp(64, 320)
+    ((1.0 / spacing).ceil() as usize).clamp(64, 200)
 }
 
 /// The box the polygonizer marches: the points and the carrier's own zero set, with a margin of
