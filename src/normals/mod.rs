@@ -8,7 +8,7 @@ mod orient;
 pub use estimate::estimate_normals;
 pub use orient::orient_normals;
 
-use crate::geometry::Point3;
+use crate::geometry::{Point3, dot, norm};
 
 /// Parameters of normal estimation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -40,14 +40,10 @@ pub fn inconsistent_fraction(
         nearest_k(&points[i], k + 1, &mut knn);
         for &(j, _) in knn.iter().filter(|(j, _)| *j as usize != i) {
             let (a, b) = (normals[i], normals[j as usize]);
-            let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-            let (na, nb) = (
-                a[0] * a[0] + a[1] * a[1] + a[2] * a[2],
-                b[0] * b[0] + b[1] * b[1] + b[2] * b[2],
-            );
+            let (na, nb) = (norm(a), norm(b));
             if na > 0.0 && nb > 0.0 {
                 total += 1;
-                if d < -0.5 * (na * nb).sqrt() {
+                if dot(a, b) < -0.5 * na * nb {
                     bad += 1;
                 }
             }
@@ -69,7 +65,7 @@ pub fn reorient_normals(
     let flipped = oriented
         .iter()
         .zip(normals)
-        .filter(|(a, b)| a[0] * b[0] + a[1] * b[1] + a[2] * b[2] < 0.0)
+        .filter(|(a, b)| dot(**a, **b) < 0.0)
         .count();
     (oriented, flipped)
 }

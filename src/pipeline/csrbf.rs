@@ -10,7 +10,7 @@ use crate::params::{Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
     Carrier, CarrierKind, Correction, Kernel, LevelPlan, RbfError, RbfField, Spline, SplineLevel,
-    SupportEstimate, assemble_matrix, estimate_support, fit_carrier, plan_levels,
+    SupportEstimate, assemble_matrix, estimate_support, fit_carrier, linear_poly, plan_levels,
 };
 use crate::report::{LevelReport, MatrixReport, Timings};
 use crate::spatial::{SpatialIndex, build_index};
@@ -43,7 +43,7 @@ pub fn fit_field(
         .blocks
         .max_points(points.len())
         .map_or(1.0, |m| (1.5 * m as f64 / points.len() as f64).min(1.0));
-    check_memory(&support, alive, count, params.max_memory_mib)?;
+    check_memory(&support, points.len(), alive, count, params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
 
     progress.stage("carrier");
@@ -251,8 +251,7 @@ fn subtract_level(
         .par_iter_mut()
         .zip(points.par_iter())
         .for_each_init(Vec::new, |hits, (t, p)| {
-            let poly = polynomial.map_or(0.0, |v| v[0] + v[1] * p[0] + v[2] * p[1] + v[3] * p[2]);
-            *t -= level.value(kernel, p, hits) + poly;
+            *t -= level.value(kernel, p, hits) + linear_poly(polynomial, p);
         });
 }
 
@@ -382,13 +381,13 @@ fn estimate_missing_normals(
 /// `alive` is the share of the points whose system is in memory at once (1 without blocks).
 fn check_memory(
     s: &SupportEstimate,
+    n: usize,
     alive: f64,
     levels: usize,
     budget_mib: u64,
 ) -> Result<(), RbfError> {
     let share = if levels > 1 { 4.0 / 3.0 } else { 1.0 } * alive;
     let mib = s.estimated_nnz * share * 32.0 / (1u64 << 20) as f64;
-    let n = (s.estimated_nnz / s.mean_neighbours.max(1.0)).round() as usize;
     if mib > budget_mib as f64 {
         return Err(RbfError::TooLarge {
             support: s.radius,

@@ -62,6 +62,11 @@ impl SplineLevel {
     }
 }
 
+/// `v₀ + v·x` for `[v₀, v_x, v_y, v_z]`, 0 without a polynomial.
+pub fn linear_poly(v: Option<[f64; 4]>, x: &Point3) -> f64 {
+    v.map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
+}
+
 /// One spline `U(x) = Σ_l Σ_i λ_{l,i} φ(|x − P_{l,i}| / R_l) + p(x)`: the levels (coarse to fine)
 /// and the optional linear polynomial. The whole correction of a global fit, or one block's.
 pub struct Spline {
@@ -73,8 +78,7 @@ pub struct Spline {
 
 impl Spline {
     fn poly_value(&self, x: &Point3) -> f64 {
-        self.polynomial
-            .map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
+        linear_poly(self.polynomial, x)
     }
 
     /// `U(x)` over the first `upto` levels (all: `usize::MAX`).

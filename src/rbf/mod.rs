@@ -13,7 +13,7 @@ pub mod support;
 
 pub use assemble::assemble_matrix;
 pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, fit_carrier};
-pub use field::{Correction, RbfField, Spline, SplineLevel};
+pub use field::{Correction, RbfField, Spline, SplineLevel, linear_poly};
 pub use kernel::Kernel;
 pub use levels::{LevelPlan, plan_levels};
 pub use pou::{BlockPlan, Blocks, PouBlock, plan_blocks};
