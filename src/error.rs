@@ -9,7 +9,7 @@ pub enum ReconError {
     Params(#[from] crate::params::ParamError),
     /// The cloud cannot be reconstructed (empty, degenerate, ...).
     #[error(transparent)]
-    Input(#[from] crate::geometry::clean::InputError),
+    Input(#[from] crate::clean::InputError),
     /// The spatial index could not be built.
     #[error(transparent)]
     Spatial(#[from] crate::spatial::SpatialError),
@@ -79,5 +79,95 @@ impl ReconError {
             self,
             ReconError::Input(_) | ReconError::Rbf(crate::rbf::RbfError::Carrier(_))
         )
+    }
+}
+
+/// What kind of failure an error is, for callers that answer users (an exit code, an HTTP status):
+/// the stage errors say what went wrong, this says whose it is and what the caller can do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// A parameter out of range (HTTP 400).
+    BadParameter,
+    /// The input's format is not one the readers know (HTTP 415).
+    UnsupportedFormat,
+    /// The input is over a size or point-count limit (HTTP 413).
+    TooLarge,
+    /// The input bytes are not a valid point file (HTTP 422).
+    InvalidInput,
+    /// The points parse but cannot give a surface: empty, degenerate, noise (HTTP 422).
+    Unreconstructable,
+    /// The reconstruction would need more memory than the budget (HTTP 422).
+    OverBudget,
+    /// The caller asked to stop (or its time limit passed).
+    Cancelled,
+    /// A fault of the machine or a bug: disk, encoding, a failed solve (HTTP 500).
+    Internal,
+}
+
+impl ErrorKind {
+    /// Stable machine-readable code (the HTTP API's `error.code`).
+    pub fn code(self) -> &'static str {
+        match self {
+            ErrorKind::BadParameter => "bad_parameter",
+            ErrorKind::UnsupportedFormat => "unsupported_media_type",
+            ErrorKind::TooLarge => "too_large",
+            ErrorKind::InvalidInput => "invalid_input",
+            ErrorKind::Unreconstructable => "unreconstructable",
+            ErrorKind::OverBudget => "system_too_large",
+            ErrorKind::Cancelled => "cancelled",
+            ErrorKind::Internal => "reconstruction_failed",
+        }
+    }
+
+    /// The kind whose [`ErrorKind::code`] this is (a stored job keeps only the code).
+    pub fn from_code(code: &str) -> Option<ErrorKind> {
+        use ErrorKind::*;
+        [
+            BadParameter,
+            UnsupportedFormat,
+            TooLarge,
+            InvalidInput,
+            Unreconstructable,
+            OverBudget,
+            Cancelled,
+            Internal,
+        ]
+        .into_iter()
+        .find(|k| k.code() == code)
+    }
+}
+
+impl ReconError {
+    /// Whose failure this is (see [`ErrorKind`]).
+    pub fn kind(&self) -> ErrorKind {
+        if self.is_cancelled() {
+            ErrorKind::Cancelled
+        } else if self.is_input_problem() {
+            ErrorKind::Unreconstructable
+        } else {
+            match self {
+                ReconError::Params(_) => ErrorKind::BadParameter,
+                ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
+                | ReconError::TooManyPoints { .. } => ErrorKind::OverBudget,
+                _ => ErrorKind::Internal,
+            }
+        }
+    }
+}
+
+impl crate::io::IoError {
+    /// Whose failure this is (see [`ErrorKind`]): the reader's complaints about the bytes are the
+    /// input's; open/read/write/encode failures are the machine's.
+    pub fn kind(&self) -> ErrorKind {
+        use crate::io::IoError as E;
+        match self {
+            E::UnknownFormat { .. } => ErrorKind::UnsupportedFormat,
+            E::TooLarge { .. } | E::TooManyPoints { .. } => ErrorKind::TooLarge,
+            E::OverMemory { .. } => ErrorKind::OverBudget,
+            E::Open { .. } | E::Read { .. } | E::Write { .. } | E::Encode { .. } => {
+                ErrorKind::Internal
+            }
+            _ => ErrorKind::InvalidInput,
+        }
     }
 }

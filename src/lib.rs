@@ -9,6 +9,8 @@
 //! carriers, assembly, field), [`ordering`], [`linalg`], [`polygonize`], [`mesh`], [`io`].
 #![warn(missing_docs)]
 
+pub mod clean;
+#[cfg(feature = "cli")]
 pub mod cli;
 pub mod error;
 pub mod geometry;
@@ -23,6 +25,7 @@ pub mod polygonize;
 pub mod progress;
 pub mod rbf;
 pub mod report;
+#[cfg(feature = "server")]
 pub mod server;
 pub mod spatial;
 pub mod variational;

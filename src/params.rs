@@ -1,7 +1,7 @@
 //! Reconstruction parameters: one definition shared by the library, the command line, the HTTP API
 //! and the report. Defaults live only in [`ReconParams::default`].
 
-use crate::geometry::clean::CleanParams;
+use crate::clean::CleanParams;
 use crate::linalg::SolverKind;
 use crate::ordering::OrderingKind;
 use crate::rbf::{CarrierParams, Kernel, Support};
@@ -45,7 +45,7 @@ pub enum Method {
     /// Carrier + compactly supported Wendland spline (sparse; scales to large N).
     #[default]
     Csrbf,
-    /// Turk–O'Brien variational implicit (`r³`, dense; small N, up to ~5k points).
+    /// Turk–O'Brien variational implicit (`r³`, dense; refused above 12,000 unknowns ≈ 6,000 points, practical up to ~2–3k).
     Variational,
     /// Shen's MLS implicit (linear basis, true normals; `O(N)` per evaluation).
     Mls,
@@ -147,11 +147,11 @@ pub struct ReconParams {
     /// `(A + λI) λ = r` approximates instead of interpolating.
     pub smoothing: f64,
     /// Statistical outlier removal before fitting (default off).
-    pub outliers: Option<crate::geometry::outliers::OutlierParams>,
+    pub outliers: Option<crate::clean::outliers::OutlierParams>,
     /// Unsupported surface: trim or keep (default `auto`).
     pub boundary: Boundary,
     /// CSRBF levels, coarse to fine, each halving the support radius (default 1: the seed's single
-    /// level; 3–5 fill holes and adapt to uneven density at 2–3× the evaluation cost).
+    /// level; more levels adapt to uneven density at ~2.5× the evaluation cost).
     pub levels: usize,
     /// Block decomposition with a partition of unity (default `auto`: one system up to 250,000
     /// points, blocks of at most 250,000 points above).
@@ -282,102 +282,98 @@ impl ReconParams {
 /// shared by the command line (flattened into `rbfsurf reconstruct`) and the HTTP API (query string
 /// or multipart fields, same kebab-case names). Converted and validated by
 /// `ReconParams::try_from(&ReconOptions)`.
-#[derive(
-    Debug,
-    Clone,
-    Default,
-    PartialEq,
-    clap::Args,
-    serde::Deserialize,
-    serde::Serialize,
-    utoipa::IntoParams,
-)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(feature = "server", derive(utoipa::IntoParams))]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
+#[cfg_attr(feature = "server", into_params(parameter_in = Query))]
 pub struct ReconOptions {
-    /// Method: csrbf (default), variational (Turk–O'Brien r³, dense, ≤ ~5k points), mls (Shen).
-    #[arg(long)]
+    /// Method: csrbf (default), variational (Turk–O'Brien r³, dense; refused above 12,000 unknowns ≈ 6,000 points, practical up to ~2–3k), mls (Shen).
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub method: Option<Method>,
     /// Kernel: wendland-c0 (seed), wendland-c2 (default), wendland-c4.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub kernel: Option<Kernel>,
     /// Support radius R in normalised units (the longest bbox edge is 1).
-    #[arg(long, conflicts_with = "neighbours", allow_negative_numbers = true)]
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, conflicts_with = "neighbours", allow_negative_numbers = true)
+    )]
     #[serde(default)]
     pub support: Option<f64>,
     /// Choose R to give about K neighbours per point (default 30).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub neighbours: Option<usize>,
     /// Carrier solid: auto (default: local with normals, else ellipsoid), sphere, ellipsoid, local.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub carrier: Option<crate::rbf::CarrierKind>,
     /// Matrix ordering: none, bfs (default, seed Algorithm III), rcm.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub ordering: Option<OrderingKind>,
     /// Solver: auto (default: sparse when its factor fits --max-memory-mib, else cg), sparse (faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl), cg (Jacobi-preconditioned conjugate gradients, no factor).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub solver: Option<SolverKind>,
     /// Polynomial part: none (default) or linear (doubly bordered system).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub polynomial: Option<Polynomial>,
     /// Marching grid cells along the longest axis (default: from the point spacing, 64..200).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub resolution: Option<usize>,
     /// Spatial index: octree (default) or kdtree.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub index: Option<IndexKind>,
     /// Octree leaf size K (default 16).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub leaf_size: Option<usize>,
     /// Merge points closer than this fraction of the bbox diagonal (default 1e-6).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub merge_tolerance: Option<f64>,
     /// Memory budget in MiB (default 8192; alias --max-memory): inputs whose reconstruction would not fit are refused before reading, systems whose matrix or factor would not fit before allocating.
-    #[arg(long, visible_alias = "max-memory")]
+    #[cfg_attr(feature = "cli", arg(long, visible_alias = "max-memory"))]
     #[serde(default, alias = "max-memory")]
     pub max_memory_mib: Option<u64>,
     /// Smoothing λ on the matrix diagonal: 0 (default) interpolates; 1e-3..1e-1 for noisy scans.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub smoothing: Option<f64>,
-    /// Remove statistical outliers: points whose mean distance to 16 neighbours exceeds the mean by this many standard deviations (e.g. 3; default off).
-    #[arg(long)]
+    /// Remove statistical outliers: points whose mean distance to 16 neighbours exceeds the median by this many robust standard deviations (1.4826 · MAD) (e.g. 3; default off).
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub outlier_std_ratio: Option<f64>,
     /// Unsupported surface: auto (default: trim with the local carrier, closed otherwise), trim, closed.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub boundary: Option<Boundary>,
-    /// CSRBF levels, coarse to fine, each halving the support radius: 1 (default, the seed's single level) to 8; 3–5 fill holes and adapt to uneven density.
-    #[arg(long)]
+    /// CSRBF levels, coarse to fine, each halving the support radius: 1 (default, the seed's single level) to 8; more levels adapt to uneven density at ~2.5× the evaluation cost (4 levels measured on the bunny).
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub levels: Option<usize>,
     /// Partition-of-unity blocks: auto (default: one system up to 250,000 points, blocks of at most 250,000 above), none (one global system), or the maximum points per block (≥ 1000).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
-    #[param(value_type = Option<String>)]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub blocks: Option<crate::rbf::Blocks>,
     /// Drop connected components with fewer triangles than this fraction of the largest (0 = keep all, the default; 0.01 removes floaters from noise and outliers).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub min_component: Option<f64>,
 }
@@ -407,12 +403,12 @@ impl TryFrom<&ReconOptions> for ReconParams {
             },
             max_memory_mib: a.max_memory_mib.unwrap_or(d.max_memory_mib),
             smoothing: a.smoothing.unwrap_or(d.smoothing),
-            outliers: a.outlier_std_ratio.map(|std_ratio| {
-                crate::geometry::outliers::OutlierParams {
+            outliers: a
+                .outlier_std_ratio
+                .map(|std_ratio| crate::clean::outliers::OutlierParams {
                     std_ratio,
                     ..Default::default()
-                }
-            }),
+                }),
             boundary: a.boundary.unwrap_or(d.boundary),
             levels: a.levels.unwrap_or(d.levels),
             blocks: a.blocks.unwrap_or(d.blocks),

@@ -1,6 +1,6 @@
 //! The JSON report of a reconstruction (keys are a contract, see README "Report").
 
-use crate::geometry::clean::CleanStats;
+use crate::clean::CleanStats;
 use crate::mesh::topology::MeshTopology;
 use serde::Serialize;
 
@@ -80,13 +80,56 @@ pub struct MatrixReport {
     pub factor_values: usize,
     /// Solver that ran: `sparse`, `envelope`, `ldl`, `cg` (several joined by `+` across levels), or
     /// the dense solver of a global method.
-    pub solver_used: String,
+    pub solver_used: SolversUsed,
     /// Per-level systems of a CSRBF fit, coarse to fine (one entry for a single-level fit; the
     /// other fields then describe the finest level, except `factor_values`, which sums all levels).
     pub levels: Vec<LevelReport>,
     /// Blocks of the partition of unity (1 = one global system); per-level entries then sum the
     /// blocks' systems (n, nnz, factor values) and take the largest iteration count.
     pub blocks: usize,
+}
+
+/// The distinct solvers that ran, in order of first use; written in the report as their names
+/// joined by `+` (`sparse`, `sparse+cg`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SolversUsed(Vec<&'static str>);
+
+impl SolversUsed {
+    /// One solver.
+    pub fn one(name: &'static str) -> Self {
+        SolversUsed(vec![name])
+    }
+
+    /// Record that `name` ran (kept once, in order of first use).
+    pub fn add(&mut self, name: &'static str) {
+        if !self.0.contains(&name) {
+            self.0.push(name);
+        }
+    }
+
+    /// Record every solver of `other`.
+    pub fn merge(&mut self, other: &SolversUsed) {
+        for &s in &other.0 {
+            self.add(s);
+        }
+    }
+
+    /// The names, in order of first use.
+    pub fn names(&self) -> &[&'static str] {
+        &self.0
+    }
+}
+
+impl std::fmt::Display for SolversUsed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0.join("+"))
+    }
+}
+
+impl Serialize for SolversUsed {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
 }
 
 /// One level of a multi-level CSRBF fit.

@@ -41,8 +41,8 @@ impl EpochBar {
 }
 
 impl Progress for EpochBar {
-    fn stage(&self, name: &str) {
-        self.bar.set_message(name.to_string());
+    fn stage(&self, stage: crate::progress::Stage) {
+        self.bar.set_message(stage.name());
         self.bar.set_position(0);
     }
 
@@ -142,7 +142,7 @@ pub struct CurveArgs {
     /// Write the JSON report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Use a built-in data set instead of a file (shen27, koch0..koch4, square, ...).
+    /// Use a built-in data set instead of a file (shen27, koch0..koch6, koch1-interior, koch2-interior, square, unit-square-centre, five-point, circle8).
     #[arg(long)]
     pub dataset: Option<String>,
     /// MLP options.

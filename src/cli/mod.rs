@@ -8,6 +8,7 @@ mod generate;
 mod http;
 pub mod progress;
 mod reconstruct;
+#[cfg(feature = "server")]
 mod serve;
 mod submit;
 
@@ -50,17 +51,19 @@ pub enum Command {
     Reconstruct(reconstruct::ReconstructArgs),
     /// Accuracy of a mesh against a reference mesh or point set (Chamfer, Hausdorff, relative to the reference's bbox diagonal).
     Compare(compare::CompareArgs),
-    /// Write a synthetic point set with normals (sphere, torus, two-spheres) as PLY.
+    /// Write a synthetic point set as PLY (sphere, torus, two-spheres, knot, bumpy-sphere; normals unless --no-normals; optional noise, outliers, holes, truth mesh).
     Generate(generate::GenerateArgs),
     /// 2D implicit curves workbench: fit constraints (x y [nx ny] [value]) and write an SVG + JSON report.
     Curve(curve::CurveArgs),
     /// Run a benchmark and print a table (`table1`: the seed's Table 1; `scaling`: N = 10k..300k).
     Bench(bench::BenchArgs),
     /// Run the HTTP service: REST API, job queue, WebGL viewer at `/`.
+    #[cfg(feature = "server")]
     Serve(serve::ServeArgs),
     /// Upload a point file to a running server, wait, download the mesh (non-zero exit on failure).
     Submit(submit::SubmitArgs),
     /// Print the OpenAPI document of the HTTP API.
+    #[cfg(feature = "server")]
     Openapi(serve::OpenApiArgs),
 }
 
@@ -94,18 +97,35 @@ where
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
         Command::Curve(a) => curve::run(&a),
+        #[cfg(feature = "server")]
         Command::Serve(a) => serve::run(&a),
         Command::Submit(a) => submit::run(&a),
+        #[cfg(feature = "server")]
         Command::Openapi(a) => serve::run_openapi(&a),
     };
     match result {
         Ok(()) => 0,
         Err(e) => {
-            let msg: Vec<String> = e.chain().map(|c| c.to_string()).collect();
-            eprintln!("rbfsurf: error: {}", msg.join(": ").replace('\n', " "));
+            eprintln!("rbfsurf: error: {}", one_line(&e));
             1
         }
     }
+}
+
+/// The error and its causes on one line, each cause once (a stage error that already quotes its
+/// OS error does not get it appended again).
+fn one_line(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !msg.contains(&text) {
+            if !msg.is_empty() {
+                msg.push_str(": ");
+            }
+            msg.push_str(&text);
+        }
+    }
+    msg.replace('\n', " ")
 }
 
 #[cfg(test)]

@@ -30,8 +30,8 @@ impl BarProgress {
 }
 
 impl Progress for BarProgress {
-    fn stage(&self, name: &str) {
-        self.bar.set_message(name.to_string());
+    fn stage(&self, stage: crate::progress::Stage) {
+        self.bar.set_message(stage.name());
         self.bar.set_position(0);
     }
 

@@ -1,14 +1,12 @@
 //! `rbfsurf reconstruct INPUT -o OUT.{glb,ply,obj} [--report REPORT.json] [parameters]`.
 
 use super::progress::BarProgress;
-use crate::io::{
-    MeshFormat, ReadLimits, peek_point_count, read_point_cloud, write_atomic, write_mesh,
-};
+use crate::cli::outln;
+use crate::io::{MeshFormat, ReadLimits};
 use crate::params::{ReconOptions, ReconParams};
-use crate::progress::Progress;
-use anyhow::{Context, Result, bail};
+use crate::pipeline::{self, PointSource, RunOutput};
+use anyhow::{Result, bail};
 use std::path::PathBuf;
-use std::time::Instant;
 
 /// Arguments of `reconstruct`. Every parameter is optional: `None` takes the library default.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -27,13 +25,12 @@ pub struct ReconstructArgs {
     /// Refuse inputs with more points than this (default 50,000,000).
     #[arg(long)]
     pub max_points: Option<usize>,
-    /// No progress bar.
+    /// No progress bar (the result line is still printed, on standard output).
     #[arg(short, long)]
     pub quiet: bool,
 }
 
 pub fn run(a: &ReconstructArgs) -> Result<()> {
-    let start = Instant::now();
     let params = ReconParams::try_from(&a.options)?;
     let format = MeshFormat::from_path(&a.output)?;
     for out in std::iter::once(&a.output).chain(a.report.as_ref()) {
@@ -48,9 +45,6 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
             );
         }
     }
-    let input = a.input.display().to_string();
-    let progress = BarProgress::new(a.quiet);
-    let t = Instant::now();
     let mut limits = ReadLimits {
         max_memory_mib: params.max_memory_mib,
         ..ReadLimits::default()
@@ -58,41 +52,34 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
     if let Some(m) = a.max_points {
         limits.max_points = m;
     }
-    // Refuse a scan whose points alone cannot fit the memory budget before reading it.
-    let hint = peek_point_count(&a.input)?;
-    hint.check_budget(&limits, &a.input)?;
-    crate::pipeline::check_scale(hint.points, params.max_memory_mib)
-        .with_context(|| input.clone())?;
-    let cloud = read_point_cloud(&a.input, &limits)?;
-    let read_s = t.elapsed().as_secs_f64();
-    let mut rec = crate::reconstruct(&cloud, &params, &progress).with_context(|| input.clone())?;
-    drop(cloud);
-    progress.stage("write");
-    let t = Instant::now();
-    write_mesh(&a.output, &rec.mesh, format)?;
-    rec.report.timings_s.read = read_s;
-    rec.report.timings_s.write = t.elapsed().as_secs_f64();
-    rec.report.timings_s.total = start.elapsed().as_secs_f64();
-    rec.report.memory.peak_rss_mib = crate::report::peak_rss_mib();
+    let output = RunOutput {
+        mesh: &a.output,
+        format,
+        report: a.report.as_deref(),
+    };
+    let progress = BarProgress::new(a.quiet);
+    let summary = pipeline::run(
+        PointSource::File(&a.input),
+        &params,
+        &limits,
+        &output,
+        &progress,
+    );
     progress.finish();
-    if let Some(path) = &a.report {
-        let json = serde_json::to_vec_pretty(&rec.report)?;
-        write_atomic(path, &json)?;
-    }
-    if !a.quiet {
-        let m = &rec.report.mesh;
-        eprintln!(
-            "{} -> {}: {} points, {} triangles, {} component(s), watertight {}, genus {}, residual max {:.1e}, {:.2} s",
-            input,
-            a.output.display(),
-            rec.report.input.used,
-            m.triangles,
-            m.components,
-            m.watertight,
-            m.genus.map_or("-".to_string(), |g| g.to_string()),
-            rec.report.residual.max,
-            rec.report.timings_s.total
-        );
-    }
+    let report = summary?.report;
+    let m = &report.mesh;
+    // The result line is the command's output: `-q` hides the progress bar, not the result.
+    outln!(
+        "{} -> {}: {} points, {} triangles, {} component(s), watertight {}, genus {}, residual max {:.1e}, {:.2} s",
+        a.input.display(),
+        a.output.display(),
+        report.input.used,
+        m.triangles,
+        m.components,
+        m.watertight,
+        m.genus.map_or("-".to_string(), |g| g.to_string()),
+        report.residual.max,
+        report.timings_s.total
+    );
     Ok(())
 }

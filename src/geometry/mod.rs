@@ -5,9 +5,7 @@
 //! meshes are mapped back to input units on output.
 
 mod aabb;
-pub mod clean;
 mod normalize;
-pub mod outliers;
 pub mod pca;
 pub mod synthetic;
 

@@ -239,7 +239,7 @@ mod tests {
     }
 
     impl Progress for Recorder {
-        fn stage(&self, _name: &str) {}
+        fn stage(&self, _stage: crate::progress::Stage) {}
         fn fraction(&self, done: f64) {
             self.calls.fetch_add(1, Ordering::Relaxed);
             self.fractions.lock().unwrap().push(done);

@@ -7,7 +7,7 @@
 //! whose samples are then its points. All distances are divided by the reference's bounding-box diagonal.
 //! Cost `O((S + F) log F)` for `S` samples and `F` triangles, parallel over samples (rayon).
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::KdTree;
 use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
@@ -242,15 +242,8 @@ pub fn compare(
                     index,
                 });
             }
-            let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(points)
-                .map_err(|_| CompareError::DegenerateReference)?;
-            let nearest = |p: Point3| {
-                let nn = tree
-                    .query(&p)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute();
-                nn.distance.sqrt()
-            };
+            let tree = KdTree::build(points).map_err(|_| CompareError::DegenerateReference)?;
+            let nearest = |p: Point3| tree.nearest_one(&p).map_or(f64::INFINITY, |(_, d)| d);
             let to_ref = mean_max(&mesh_samples, nearest);
             (
                 Aabb::from_points(points).diagonal(),

@@ -5,7 +5,7 @@
 //! spline out.
 
 use super::check_cancel;
-use super::csrbf::{fit_levels, join_solver};
+use super::csrbf::fit_levels;
 use crate::error::ReconError;
 use crate::geometry::Point3;
 use crate::params::ReconParams;
@@ -19,7 +19,7 @@ use std::sync::Arc;
 struct Quiet<'a>(&'a dyn Progress);
 
 impl Progress for Quiet<'_> {
-    fn stage(&self, _name: &str) {}
+    fn stage(&self, _stage: crate::progress::Stage) {}
     fn fraction(&self, _done: f64) {}
     fn cancelled(&self) -> bool {
         self.0.cancelled()
@@ -44,7 +44,7 @@ pub(crate) fn fit_blocks(
     let coarsest = support.radius * (1u64 << (levels.max(1) - 1)) as f64;
     let overlap = 3.0 * coarsest;
     let plans = plan_blocks(points, max_points, overlap);
-    progress.stage("blocks");
+    progress.stage(crate::progress::Stage::Blocks);
     let quiet = Quiet(progress);
     let mut blocks = Vec::with_capacity(plans.len());
     let mut report = MatrixReport::default();
@@ -83,9 +83,7 @@ fn merge_report(total: &mut MatrixReport, block: MatrixReport) {
     total.profile_values += block.profile_values;
     total.dense_values += block.dense_values;
     total.factor_values += block.factor_values;
-    for s in block.solver_used.split('+') {
-        total.solver_used = join_solver(&total.solver_used, s);
-    }
+    total.solver_used.merge(&block.solver_used);
     for (k, l) in block.levels.into_iter().enumerate() {
         if k == total.levels.len() {
             total.levels.push(LevelReport {

@@ -6,7 +6,7 @@ use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverKind, SolverParams, factorize_owned, solve_bordered};
 use crate::normals::{NormalParams, estimate_oriented_normals};
 use crate::ordering::{MatrixShape, Permutation, compute_ordering, matrix_shape};
-use crate::params::{Polynomial, ReconParams};
+use crate::params::{Method, Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
     Carrier, CarrierKind, Correction, Kernel, LevelPlan, RbfError, RbfField, Spline, SplineLevel,
@@ -30,7 +30,7 @@ pub fn fit_field(
         clean_and_normalize(cloud, params, progress, timings)?;
     let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
 
-    progress.stage("index");
+    progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();
     let index: Arc<dyn SpatialIndex + Send> =
         Arc::from(build_index(&points, params.index, params.leaf_size)?);
@@ -46,7 +46,7 @@ pub fn fit_field(
     check_memory(&support, points.len(), alive, count, params.max_memory_mib)?;
     timings.index = t.elapsed().as_secs_f64();
 
-    progress.stage("carrier");
+    progress.stage(crate::progress::Stage::Carrier);
     let t = Instant::now();
     let (carrier, normals_flipped) = fit_oriented_carrier(
         &points,
@@ -79,7 +79,7 @@ pub fn fit_field(
             (Correction::Blocks(blocks), matrix)
         }
     };
-    let carrier_name = carrier.name();
+    let carrier_kind = carrier.kind();
     let carrier_bounds = carrier.zero_set_bounds();
     let field = RbfField {
         correction,
@@ -94,9 +94,9 @@ pub fn fit_field(
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         field: Box::new(field),
-        method: "csrbf",
+        method: Method::Csrbf,
         support_radius: support.radius,
-        carrier: carrier_name,
+        carrier: Some(carrier_kind),
         carrier_bounds,
         normalization,
         points,
@@ -119,7 +119,7 @@ fn check_surface(points: &[Point3], index: &dyn SpatialIndex) -> Result<(), Reco
     let thickness =
         crate::geometry::pca::surface_thickness(points, |p, k, out| index.nearest_k(p, k, out));
     if thickness > MAX_SURFACE_THICKNESS {
-        return Err(crate::geometry::clean::InputError::NotASurface {
+        return Err(crate::clean::InputError::NotASurface {
             n: points.len(),
             thickness,
         }
@@ -219,7 +219,11 @@ pub(crate) fn fit_levels(
             profile_values: shape.profile_values,
             dense_values: shape.dense_values,
             factor_values: matrix.factor_values + solved.factor_values,
-            solver_used: join_solver(&matrix.solver_used, solved.solver),
+            solver_used: {
+                let mut used = std::mem::take(&mut matrix.solver_used);
+                used.add(solved.solver);
+                used
+            },
             levels: std::mem::take(&mut matrix.levels),
             blocks: 1,
         };
@@ -255,17 +259,6 @@ fn subtract_level(
         });
 }
 
-/// `"sparse"`, `"sparse+cg"`, ...: the distinct solvers that ran, in order.
-pub(crate) fn join_solver(so_far: &str, next: &str) -> String {
-    if so_far.is_empty() {
-        next.to_string()
-    } else if so_far.split('+').any(|s| s == next) {
-        so_far.to_string()
-    } else {
-        format!("{so_far}+{next}")
-    }
-}
-
 /// Assemble `A (+ λI)` and compute the ordering and the matrix shape under it (stages `assemble`, `order`).
 fn assemble_and_order(
     points: &[Point3],
@@ -275,7 +268,7 @@ fn assemble_and_order(
     progress: &dyn Progress,
     timings: &mut Timings,
 ) -> Result<(CsMat<f64>, Permutation, MatrixShape), ReconError> {
-    progress.stage("assemble");
+    progress.stage(crate::progress::Stage::Assemble);
     let t = Instant::now();
     let a = assemble_matrix(
         points,
@@ -286,7 +279,7 @@ fn assemble_and_order(
         progress,
     )?;
     timings.assemble += t.elapsed().as_secs_f64();
-    progress.stage("order");
+    progress.stage(crate::progress::Stage::Order);
     let t = Instant::now();
     let perm = compute_ordering(params.ordering, points, radius, &a, None)?;
     let shape = matrix_shape(&a, &perm)?;
@@ -317,7 +310,7 @@ fn solve_weights(
     progress: &dyn Progress,
     timings: &mut Timings,
 ) -> Result<Solved, ReconError> {
-    progress.stage("factor");
+    progress.stage(crate::progress::Stage::Factor);
     let t = Instant::now();
     let budget_values =
         (params.max_memory_mib as usize * (1 << 20) / 8).saturating_sub(2 * a.nnz());
@@ -328,7 +321,7 @@ fn solve_weights(
     };
     let (factor, fstats) = factorize_owned(a, Some(perm), &solver, progress)?;
     timings.factor += t.elapsed().as_secs_f64();
-    progress.stage("solve");
+    progress.stage(crate::progress::Stage::Solve);
     let t = Instant::now();
     let (weights, poly) = match polynomial {
         Polynomial::None => {
@@ -370,7 +363,7 @@ fn estimate_missing_normals(
     if clean.normals.is_some() || !wants_local {
         return false;
     }
-    progress.stage("normals");
+    progress.stage(crate::progress::Stage::Normals);
     clean.normals = Some(estimate_oriented_normals(points, &NormalParams::default()));
     true
 }

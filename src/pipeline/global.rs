@@ -23,13 +23,13 @@ pub(super) fn fit_global(
 ) -> Result<FittedField, ReconError> {
     let (clean, clean_stats, normalization, points) =
         clean_and_normalize(cloud, params, progress, timings)?;
-    progress.stage("index");
+    progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();
     let index = build_index(&points, IndexKind::KdTree, 16)?;
     let support = estimate_support(&points, index.as_ref(), Support::Neighbours(8))?;
     timings.index = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
-    progress.stage("factor");
+    progress.stage(crate::progress::Stage::Factor);
     let t = Instant::now();
     let vp = VariationalParams::default();
     let normals = clean.normals.as_deref();
@@ -48,7 +48,7 @@ pub(super) fn fit_global(
                 profile_values: n * (n + 1) / 2,
                 dense_values: n * n,
                 factor_values: n * n,
-                solver_used: "dense-lblt".into(),
+                solver_used: crate::report::SolversUsed::one("dense-lblt"),
                 levels: Vec::new(),
                 blocks: 1,
             };
@@ -61,9 +61,9 @@ pub(super) fn fit_global(
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         field,
-        method: params.method.name(),
+        method: params.method,
         support_radius: 4.0 * support.spacing,
-        carrier: "none",
+        carrier: None,
         carrier_bounds: None,
         normalization,
         points,

@@ -1,13 +1,13 @@
 //! The reconstruction pipeline: clean → normalise → index → carrier → assemble → order → factor →
 //! solve → residual → polygonize → post. Stage calls only; each stage lives in its own module.
 
+use crate::clean::{CleanStats, clean_cloud};
 use crate::error::ReconError;
-use crate::geometry::clean::{CleanStats, clean_cloud};
 use crate::geometry::{Aabb, Normalization, Point3, PointCloud, TriMesh};
 use crate::params::{Boundary, Method, ReconParams};
 use crate::polygonize::{PolygonizeParams, ScalarField, polygonize};
 use crate::progress::Progress;
-use crate::rbf::SupportEstimate;
+use crate::rbf::{CarrierKind, SupportEstimate};
 use crate::report::{
     MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib,
 };
@@ -17,8 +17,10 @@ use std::time::Instant;
 mod blocks;
 mod csrbf;
 mod global;
+pub mod run;
 
 pub use csrbf::fit_field;
+pub use run::{PointSource, RunError, RunOutput, RunSummary, run};
 
 /// A reconstructed mesh (input units) with its report.
 pub struct Reconstruction {
@@ -32,12 +34,12 @@ pub struct Reconstruction {
 pub struct FittedField {
     /// The implicit field, normalised units.
     pub field: Box<dyn ScalarField + Send>,
-    /// Method name for the report.
-    pub method: &'static str,
+    /// The fit that ran.
+    pub method: Method,
     /// Support radius (CSRBF) or the margin scale of a global method, normalised units.
     pub support_radius: f64,
-    /// Carrier name for the report.
-    pub carrier: &'static str,
+    /// The fitted carrier (`None` for the global methods, which have none).
+    pub carrier: Option<crate::rbf::CarrierKind>,
     /// Bounds of the carrier's own zero set, when it has a closed analytic one.
     pub carrier_bounds: Option<Aabb>,
     /// Input units ↔ normalised units.
@@ -118,7 +120,7 @@ fn reconstruct_inner(
         .resolution
         .unwrap_or_else(|| auto_resolution(fit.support.spacing));
     let (domain, grid_resolution) = polygonize_domain(&fit, resolution, params.boundary);
-    progress.stage("polygonize");
+    progress.stage(crate::progress::Stage::Polygonize);
     let t = Instant::now();
     let pp = PolygonizeParams {
         resolution: grid_resolution,
@@ -130,7 +132,7 @@ fn reconstruct_inner(
         crate::mesh::trim::small_components(&mesh, params.min_component);
     let small_component_triangles = crate::mesh::trim::remove_triangles(&mut mesh, &flagged);
     timings.polygonize = t.elapsed().as_secs_f64();
-    progress.stage("post");
+    progress.stage(crate::progress::Stage::Post);
     let t = Instant::now();
     for v in &mut mesh.vertices {
         *v = fit.normalization.inverse(v);
@@ -172,7 +174,9 @@ const AUTO_TRIM_FRACTION: f64 = 0.02;
 /// the data when asked (`trim`), or automatically with the local carrier when they are more than
 /// [`AUTO_TRIM_FRACTION`] of the mesh. Returns (trimmed?, triangles removed).
 fn trim_unsupported(mesh: &mut TriMesh, fit: &FittedField, boundary: Boundary) -> (bool, usize) {
-    if boundary == Boundary::Closed || (boundary == Boundary::Auto && fit.carrier != "local") {
+    if boundary == Boundary::Closed
+        || (boundary == Boundary::Auto && fit.carrier != Some(CarrierKind::Local))
+    {
         return (false, 0);
     }
     let drop = crate::mesh::trim::unsupported_triangles(mesh, &fit.points, fit.support_radius);
@@ -222,12 +226,12 @@ fn params_report(
     trim: bool,
 ) -> ParamsReport {
     ParamsReport {
-        method: fit.method,
+        method: fit.method.name(),
         kernel: params.kernel.to_string(),
         support: fit.support_radius,
         support_input_units: fit.support_radius / fit.normalization.scale,
         neighbours: fit.support.mean_neighbours,
-        carrier: fit.carrier.to_string(),
+        carrier: fit.carrier.map_or("none", |c| c.name()).to_string(),
         ordering: params.ordering.to_string(),
         solver: params.solver.to_string(),
         polynomial: params.polynomial.to_string(),
@@ -257,12 +261,12 @@ pub(crate) fn clean_and_normalize(
     progress: &dyn Progress,
     timings: &mut Timings,
 ) -> Result<(PointCloud, CleanStats, Normalization, Vec<Point3>), ReconError> {
-    progress.stage("clean");
+    progress.stage(crate::progress::Stage::Clean);
     let t = Instant::now();
     let (mut clean, mut stats) = clean_cloud(cloud, &params.clean)?;
     if let Some(o) = &params.outliers {
-        let (kept, removed) = crate::geometry::outliers::remove_outliers(&clean, o);
-        crate::geometry::clean::check_degenerate(&kept.points, kept.normals.is_some())?;
+        let (kept, removed) = crate::clean::outliers::remove_outliers(&clean, o);
+        crate::clean::check_degenerate(&kept.points, kept.normals.is_some())?;
         clean = kept;
         stats.outliers_removed = removed;
         stats.used = clean.points.len();

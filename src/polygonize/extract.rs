@@ -438,7 +438,7 @@ mod tests {
 
     struct Recorder(Mutex<Vec<f64>>);
     impl Progress for Recorder {
-        fn stage(&self, _: &str) {}
+        fn stage(&self, _: crate::progress::Stage) {}
         fn fraction(&self, done: f64) {
             self.0.lock().unwrap().push(done);
         }

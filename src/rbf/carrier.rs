@@ -14,8 +14,7 @@
 
 use super::Kernel;
 use crate::geometry::{Aabb, Point3, dot, norm, normalized, pca::pca, sub};
-use crate::spatial::SpatialIndex;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::spatial::{KdTree, SpatialIndex};
 use std::sync::Arc;
 
 /// Which carrier solid to fit.
@@ -104,6 +103,15 @@ pub enum Carrier {
 }
 
 impl Carrier {
+    /// The fitted kind (never [`CarrierKind::Auto`]).
+    pub fn kind(&self) -> CarrierKind {
+        match self {
+            Carrier::Sphere { .. } => CarrierKind::Sphere,
+            Carrier::Ellipsoid { .. } => CarrierKind::Ellipsoid,
+            Carrier::Local(_) => CarrierKind::Local,
+        }
+    }
+
     /// Report name of the fitted kind.
     pub fn name(&self) -> &'static str {
         match self {
@@ -328,7 +336,7 @@ pub struct LocalCarrier {
     normals: Vec<Point3>,
     radius: f64,
     index: Arc<dyn SpatialIndex + Send>,
-    valid_tree: ImmutableKdTree<f64, 3>,
+    valid_tree: KdTree,
     valid_ids: Vec<u32>,
 }
 
@@ -361,7 +369,7 @@ impl LocalCarrier {
             return None;
         }
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
-        let valid_tree = ImmutableKdTree::new_from_slice(&valid_points).ok()?;
+        let valid_tree = KdTree::build(&valid_points).ok()?;
         Some(LocalCarrier {
             points: points.to_vec(),
             normals,
@@ -425,12 +433,9 @@ impl LocalCarrier {
 
     /// Signed distance to the tangent plane of the nearest point with a usable normal.
     fn nearest_plane(&self, x: &Point3) -> (f64, Point3) {
-        let nn = self
-            .valid_tree
-            .query(x)
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
-        let j = self.valid_ids[nn.item as usize] as usize;
+        // Never empty: `new` refuses a carrier without a usable normal.
+        let (item, _) = self.valid_tree.nearest_one(x).unwrap_or((0, 0.0));
+        let j = self.valid_ids[item as usize] as usize;
         (
             dot(self.normals[j], sub(*x, self.points[j])),
             self.normals[j],

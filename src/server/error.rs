@@ -1,6 +1,7 @@
 //! The API's one error type: an HTTP status plus a stable machine-readable `code` and a message
 //! that tells the caller what to do. Rendered as `{"error": {"code": "...", "message": "..."}}`.
 
+use crate::error::ErrorKind;
 use axum::Json;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -114,24 +115,29 @@ impl IntoResponse for ApiError {
     }
 }
 
+/// The HTTP status of a failure of this kind: 400 parameters, 415 format, 413 size, 422 data that
+/// cannot be reconstructed or would not fit the budget, 409 cancelled, 500 the machine's fault.
+pub fn status_of(kind: ErrorKind) -> StatusCode {
+    match kind {
+        ErrorKind::BadParameter => StatusCode::BAD_REQUEST,
+        ErrorKind::UnsupportedFormat => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        ErrorKind::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
+        ErrorKind::InvalidInput | ErrorKind::Unreconstructable | ErrorKind::OverBudget => {
+            StatusCode::UNPROCESSABLE_ENTITY
+        }
+        ErrorKind::Cancelled => StatusCode::CONFLICT,
+        ErrorKind::Internal => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
 impl From<crate::io::IoError> for ApiError {
-    /// Reader errors: unknown format → 415, over a limit → 413, anything else about the bytes → 422.
+    /// Reader errors: unknown format → 415, over a limit → 413, over the memory budget → 422
+    /// `system_too_large`, anything else about the bytes → 422; open/read failures → 500.
     fn from(e: crate::io::IoError) -> Self {
-        use crate::io::IoError as E;
-        let status = match &e {
-            E::UnknownFormat { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
-            E::TooLarge { .. } | E::TooManyPoints { .. } => StatusCode::PAYLOAD_TOO_LARGE,
-            E::Open { .. } | E::Read { .. } | E::Write { .. } | E::Encode { .. } => {
-                return ApiError::internal(e.to_string());
-            }
-            _ => StatusCode::UNPROCESSABLE_ENTITY,
-        };
-        let code = match status {
-            StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
-            StatusCode::PAYLOAD_TOO_LARGE => "too_large",
-            _ => "invalid_input",
-        };
-        ApiError::new(status, code, e.to_string())
+        match e.kind() {
+            ErrorKind::Internal => ApiError::internal(e.to_string()),
+            kind => ApiError::new(status_of(kind), kind.code(), e.to_string()),
+        }
     }
 }
 
@@ -141,8 +147,8 @@ impl From<crate::params::ParamError> for ApiError {
     }
 }
 
-impl From<crate::geometry::clean::InputError> for ApiError {
-    fn from(e: crate::geometry::clean::InputError) -> Self {
+impl From<crate::clean::InputError> for ApiError {
+    fn from(e: crate::clean::InputError) -> Self {
         ApiError::new(
             StatusCode::UNPROCESSABLE_ENTITY,
             "unreconstructable",

@@ -10,9 +10,11 @@
 use super::config::ServerConfig;
 use super::error::{ApiError, ErrorBody};
 use super::store::{Store, unfinished};
-use crate::io::{ReadLimits, encode_glb, parse_point_cloud, write_atomic};
+use crate::error::ErrorKind;
+use crate::io::{MeshFormat, PointFormat, ReadLimits};
 use crate::params::ReconParams;
-use crate::progress::Progress;
+use crate::pipeline::run::{PointSource, RunError, RunOutput, run};
+use crate::progress::{Progress, Stage};
 use axum::http::StatusCode;
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -65,48 +67,23 @@ fn now_ms() -> u64 {
         .map_or(0, |d| d.as_millis() as u64)
 }
 
-/// Stage weights of the overall progress estimate (sum 1).
-const STAGES: [(&str, f64); 11] = [
-    ("read", 0.02),
-    ("clean", 0.02),
-    ("index", 0.03),
-    ("carrier", 0.03),
-    ("assemble", 0.10),
-    ("order", 0.05),
-    ("factor", 0.25),
-    ("solve", 0.05),
-    ("polygonize", 0.35),
-    ("post", 0.05),
-    ("write", 0.05),
-];
-
-fn overall(stage: &str, fraction: f64) -> Option<f64> {
-    if stage == "blocks" {
-        // A block decomposition runs assemble..solve once per block: it spans those stages.
-        let start = overall("assemble", 0.0)?;
-        let end = overall("solve", 1.0)?;
-        return Some(start + (end - start) * fraction.clamp(0.0, 1.0));
-    }
-    let i = STAGES.iter().position(|(s, _)| *s == stage)?;
-    let before: f64 = STAGES[..i].iter().map(|(_, w)| w).sum();
-    Some(before + STAGES[i].1 * fraction.clamp(0.0, 1.0))
-}
-
 /// The [`Progress`] of a running job: publishes stage + fraction (throttled to steps of 1 %)
 /// and answers `cancelled()` for a DELETE, a shutdown or the time limit.
 struct JobProgress<'a> {
     job: &'a Job,
     shutdown: &'a AtomicBool,
     last_percent: AtomicU64,
+    current: Mutex<Option<Stage>>,
 }
 
 impl Progress for JobProgress<'_> {
-    fn stage(&self, name: &str) {
+    fn stage(&self, stage: Stage) {
+        *lock(&self.current) = Some(stage);
         self.last_percent.store(0, Ordering::Relaxed);
         self.job.tx.send_modify(|v| {
-            v.stage = Some(name.to_string());
+            v.stage = Some(stage.name().to_string());
             v.stage_progress = 0.0;
-            if let Some(p) = overall(name, 0.0) {
+            if let Some(p) = stage.overall(0.0) {
                 v.progress = v.progress.max(p);
             }
         });
@@ -117,9 +94,10 @@ impl Progress for JobProgress<'_> {
         if self.last_percent.swap(pct, Ordering::Relaxed) == pct {
             return;
         }
+        let current = *lock(&self.current);
         self.job.tx.send_modify(|v| {
             v.stage_progress = done.clamp(0.0, 1.0);
-            if let Some(p) = v.stage.as_deref().and_then(|s| overall(s, done)) {
+            if let Some(p) = current.and_then(|s| s.overall(done)) {
                 v.progress = v.progress.max(p);
             }
         });
@@ -411,6 +389,7 @@ impl JobManager {
             job,
             shutdown: &self.shutdown,
             last_percent: AtomicU64::new(0),
+            current: Mutex::new(None),
         };
         match self.reconstruct_job(job, &progress) {
             Ok(triangles) => self.finish(job, JobStatus::Succeeded, None, Some(triangles)),
@@ -445,62 +424,49 @@ impl JobManager {
         tracing::info!(id = %job.id, status = ?job.view().status, secs = started.elapsed().as_secs_f64(), "job ended");
     }
 
-    /// Reads the stored input, reconstructs, writes `mesh.glb` and `report.json`.
+    /// Reads the stored input, reconstructs, writes `mesh.glb` and `report.json`
+    /// ([`crate::pipeline::run`]).
     fn reconstruct_job(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
         let view = job.view();
-        progress.stage("read");
-        let t = Instant::now();
         let options = self
             .store
             .load_options(job.id)
             .map_err(JobError::internal)?;
         let params = ReconParams::try_from(&options)
             .map_err(|e| JobError::Failed(ApiError::from(e).body))?;
-        let bytes = std::fs::read(self.store.file(job.id, &view.input.file))
+        let data = std::fs::read(self.store.file(job.id, &view.input.file))
             .map_err(|e| JobError::internal(format!("stored input unreadable: {e}")))?;
-        let format = crate::io::PointFormat::from_path(std::path::Path::new(&view.input.file))
+        let format = PointFormat::from_path(std::path::Path::new(&view.input.file))
             .ok_or_else(|| JobError::internal("stored input has an unknown extension"))?;
         let limits = ReadLimits {
             max_points: self.cfg.max_points,
             max_bytes: self.cfg.max_upload_bytes,
             max_memory_mib: params.max_memory_mib,
         };
-        let cloud = parse_point_cloud(&bytes, format, &limits)
-            .map_err(|e| JobError::Failed(ApiError::from(e).body))?;
-        drop(bytes);
-        let read_s = t.elapsed().as_secs_f64();
-        let mut rec = match crate::reconstruct(&cloud, &params, progress) {
-            Ok(r) => r,
-            // Stages report a stop through their own error types (e.g. a linalg `Cancelled`
-            // wrapped in `ReconError::Linalg`): when a stop was requested, that is the cause.
-            Err(crate::ReconError::Cancelled) => return Err(JobError::Stopped),
-            Err(_) if progress.cancelled() => return Err(JobError::Stopped),
-            Err(e) => {
-                return Err(JobError::Failed(ErrorBody {
-                    code: failure_code(&e).into(),
-                    message: e.to_string(),
-                }));
-            }
+        let mesh = self.store.file(job.id, "mesh.glb");
+        let report = self.store.file(job.id, "report.json");
+        let output = RunOutput {
+            mesh: &mesh,
+            format: MeshFormat::Glb,
+            report: Some(&report),
         };
-        drop(cloud);
-        if progress.cancelled() {
-            return Err(JobError::Stopped);
+        let source = PointSource::Bytes {
+            data: &data,
+            format,
+        };
+        match run(source, &params, &limits, &output, progress) {
+            Ok(summary) => Ok(summary.triangles),
+            // Stages report a stop through their own error types: when a stop was requested,
+            // that is the cause.
+            Err(e) if e.kind() == ErrorKind::Cancelled || progress.cancelled() => {
+                Err(JobError::Stopped)
+            }
+            Err(e @ RunError::Write(_)) => Err(JobError::internal(e.to_string())),
+            Err(e) => Err(JobError::Failed(ErrorBody {
+                code: e.kind().code().into(),
+                message: e.to_string(),
+            })),
         }
-        progress.stage("write");
-        let t = Instant::now();
-        let glb = encode_glb(&rec.mesh).map_err(|e| JobError::internal(e.to_string()))?;
-        write_atomic(&self.store.file(job.id, "mesh.glb"), &glb)
-            .map_err(|e| JobError::internal(e.to_string()))?;
-        rec.report.timings_s.read = read_s;
-        rec.report.timings_s.write = t.elapsed().as_secs_f64();
-        rec.report.timings_s.total += read_s + rec.report.timings_s.write;
-        rec.report.memory.peak_rss_mib = crate::report::peak_rss_mib();
-        let json = serde_json::to_vec_pretty(&rec.report)
-            .map_err(|e| JobError::internal(e.to_string()))?;
-        write_atomic(&self.store.file(job.id, "report.json"), &json)
-            .map_err(|e| JobError::internal(e.to_string()))?;
-        progress.fraction(1.0);
-        Ok(rec.mesh.triangles.len())
     }
 
     /// Stores the terminal state first, then publishes it: whoever sees it (a `?wait`, a DELETE,
@@ -552,22 +518,6 @@ impl JobError {
     }
 }
 
-/// Error code of a failed reconstruction: `unreconstructable` (the data), `system_too_large`
-/// (the parameters ask for more than the memory budget), `reconstruction_failed` (anything else).
-fn failure_code(e: &crate::ReconError) -> &'static str {
-    if e.is_input_problem() {
-        "unreconstructable"
-    } else if matches!(
-        e,
-        crate::ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
-            | crate::ReconError::TooManyPoints { .. }
-    ) {
-        "system_too_large"
-    } else {
-        "reconstruction_failed"
-    }
-}
-
 fn cancelled_error() -> ErrorBody {
     ErrorBody {
         code: "cancelled".into(),
@@ -585,25 +535,4 @@ fn read<T>(m: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
 
 fn write<T>(m: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
     m.write().unwrap_or_else(|e| e.into_inner())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn stage_weights_sum_to_one_and_progress_is_monotone() {
-        let total: f64 = STAGES.iter().map(|(_, w)| w).sum();
-        assert!((total - 1.0).abs() < 1e-12);
-        let mut last = 0.0;
-        for (s, _) in STAGES {
-            for f in [0.0, 0.5, 1.0] {
-                let p = overall(s, f).unwrap();
-                assert!(p >= last - 1e-12, "{s} {f}");
-                last = p;
-            }
-        }
-        assert!((last - 1.0).abs() < 1e-12);
-        assert_eq!(overall("nonsense", 0.5), None);
-    }
 }

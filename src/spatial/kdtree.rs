@@ -52,6 +52,13 @@ impl KdTree {
             points: points.to_vec(),
         })
     }
+
+    /// The nearest point as `(index, distance)`; `None` for an empty index. Cheaper than
+    /// [`SpatialIndex::nearest_k`] with `k = 1` (no result vector).
+    pub fn nearest_one(&self, q: &Point3) -> Option<(u32, f64)> {
+        let hit = self.tree.as_ref()?.query(q).nearest_one::<Se>().execute();
+        Some((hit.item, dist2(self.points[hit.item as usize], *q).sqrt()))
+    }
 }
 
 impl SpatialIndex for KdTree {
@@ -117,6 +124,9 @@ mod tests {
             let (mut gk, mut wk) = (Vec::new(), Vec::new());
             tree.nearest_k(&q, k, &mut gk);
             crate::spatial::brute_force::nearest_k(&pts, &q, k, &mut wk);
+            if let Some(&(_, d)) = wk.first() {
+                prop_assert_eq!(tree.nearest_one(&q).map(|x| x.1), Some(d));
+            }
             let gd: Vec<f64> = gk.iter().map(|x| x.1).collect();
             let wd: Vec<f64> = wk.iter().map(|x| x.1).collect();
             prop_assert_eq!(gd, wd);

@@ -26,6 +26,8 @@ pub const NAMES: &[&str] = &[
     "koch2",
     "koch3",
     "koch4",
+    "koch5",
+    "koch6",
     "koch1-interior",
     "koch2-interior",
     "square",

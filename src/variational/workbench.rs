@@ -20,7 +20,8 @@ use super::svg::{SvgInput, render};
 use super::turk_obrien::{FitInfo, NormalMode, TurkObrienParams, fit_turk_obrien};
 
 /// The fitting method (also the `rbfsurf curve --method` values).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum CurveMethod {
     /// Turk–O'Brien with pseudo-normal points (default).
@@ -329,7 +330,7 @@ pub fn run_workbench_with_progress(
 ) -> Result<WorkbenchOutput, VariationalError> {
     let t0 = Instant::now();
     let fitted = fit_curve_with_progress(samples, p, progress)?;
-    progress.stage("contour");
+    progress.stage(crate::progress::Stage::Contour);
     finish_workbench(samples, fitted, p, t0.elapsed().as_secs_f64())
 }
 

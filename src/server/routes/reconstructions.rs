@@ -6,6 +6,7 @@
 use super::{
     JobResponse, Pairs, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs,
 };
+use crate::error::ErrorKind;
 use crate::io::{MeshFormat, PointFormat, ReadLimits, decode_glb, parse_point_cloud, write_mesh};
 use crate::server::AppState;
 use crate::server::error::{ApiError, ErrorBody, ErrorResponse};
@@ -173,7 +174,7 @@ async fn check_cloud(
             Some(f) => f,
         };
         let cloud = parse_point_cloud(&bytes, format, &limits)?;
-        crate::geometry::clean::clean_cloud(&cloud, &clean)?;
+        crate::clean::clean_cloud(&cloud, &clean)?;
         Ok((bytes, format, cloud.points.len()))
     })
     .await
@@ -284,12 +285,11 @@ async fn finished_answer(st: &AppState, view: JobView) -> Result<Response, ApiEr
             code: "internal".into(),
             message: "failed without a message".into(),
         });
-        let status = match err.code.as_str() {
-            "unreconstructable" | "invalid_input" | "system_too_large" => {
-                StatusCode::UNPROCESSABLE_ENTITY
-            }
-            _ => StatusCode::INTERNAL_SERVER_ERROR,
-        };
+        // Failures the job record names by a stage's code (timeouts, interruptions, storage) are 500s.
+        let status = ErrorKind::from_code(&err.code).map_or(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            crate::server::error::status_of,
+        );
         let body = serde_json::json!({ "error": err, "job": job_response(view, None) });
         return Ok((status, Json(body)).into_response());
     }

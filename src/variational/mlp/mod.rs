@@ -276,7 +276,7 @@ pub fn fit_mlp(
     if p.input_gain != 1.0 {
         net::spread_first_layer(&mut net, p.input_gain, p.seed);
     }
-    progress.stage("train");
+    progress.stage(crate::progress::Stage::Train);
     let t0 = Instant::now();
     let (epochs, stopped_on_plateau) = train::train(&mut net, &terms, p, progress)?;
     let seconds = t0.elapsed().as_secs_f64();

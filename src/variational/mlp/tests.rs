@@ -207,8 +207,8 @@ fn progress_reports_epochs() {
     #[derive(Default)]
     struct Rec(Mutex<(Vec<String>, Vec<f64>)>);
     impl crate::progress::Progress for Rec {
-        fn stage(&self, name: &str) {
-            self.0.lock().unwrap().0.push(name.to_string());
+        fn stage(&self, stage: crate::progress::Stage) {
+            self.0.lock().unwrap().0.push(stage.name().to_string());
         }
         fn fraction(&self, done: f64) {
             self.0.lock().unwrap().1.push(done);

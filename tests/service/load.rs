@@ -1,9 +1,9 @@
-//! Load test (ignored by default; run with `cargo test --test load -- --ignored --nocapture`):
+//! Load test (ignored by default; run with `cargo test --test service load:: -- --ignored --nocapture`):
 //! a real listener on 127.0.0.1, 200 jobs from 20 concurrent clients (all must succeed, none lost,
 //! memory bounded, p50/p95 latency printed), then a graceful restart in the middle of a batch of
 //! 100 jobs (every stored job must finish after the restart).
 
-mod server_common;
+use crate::server_common;
 
 use rbfsurf::server::{AppState, serve_on};
 use server_common::{sphere_xyz, start_on};

@@ -2,7 +2,7 @@
 //! body, hostile inputs, limits enforced before reading, SSE progress, cancel, time limits,
 //! restart recovery, expiry, and the OpenAPI document against proto/openapi.json.
 
-mod server_common;
+use crate::server_common;
 
 use axum::body::Body;
 use axum::http::{Request, StatusCode};
@@ -916,7 +916,7 @@ fn openapi_document_matches_proto() {
     let stored = std::fs::read_to_string(&path).unwrap_or_default();
     assert!(
         stored == generated,
-        "proto/openapi.json is out of date: run `cargo run -- openapi -o proto/openapi.json` (or UPDATE_OPENAPI=1 cargo test --test http)"
+        "proto/openapi.json is out of date: run `cargo run -- openapi -o proto/openapi.json` (or UPDATE_OPENAPI=1 cargo test --test service http::)"
     );
     // Every documented parameter of the upload is a ReconOptions field (one shared definition).
     let doc: serde_json::Value = serde_json::from_str(&generated).unwrap();

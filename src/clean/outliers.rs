@@ -3,10 +3,9 @@
 //! (1.4826 · median absolute deviation) is dropped — the PCL / Open3D filter with robust statistics,
 //! so a few gross outliers cannot mask each other. `O(n k log n)`, parallel, deterministic.
 
-use super::{Point3, PointCloud};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::geometry::{Point3, PointCloud};
+use crate::spatial::{KdTree, SpatialIndex};
 use rayon::prelude::*;
-use std::num::NonZero;
 
 /// Parameters of the statistical filter.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -30,21 +29,18 @@ impl Default for OutlierParams {
 pub fn remove_outliers(cloud: &PointCloud, params: &OutlierParams) -> (PointCloud, usize) {
     let n = cloud.points.len();
     let k = params.neighbours.min(n.saturating_sub(1));
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&cloud.points) else {
+    let Ok(tree) = KdTree::build(&cloud.points) else {
         return (cloud.clone(), 0);
     };
-    let Some(want) = NonZero::new(k + 1) else {
+    if k == 0 {
         return (cloud.clone(), 0);
-    };
+    }
     let mean_dist: Vec<f64> = cloud
         .points
         .par_iter()
-        .map(|p: &Point3| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(want)
-                .execute();
-            nn.iter().skip(1).map(|it| it.distance.sqrt()).sum::<f64>() / k.max(1) as f64
+        .map_init(Vec::new, |nn, p: &Point3| {
+            tree.nearest_k(p, k + 1, nn);
+            nn.iter().skip(1).map(|&(_, d)| d).sum::<f64>() / k as f64
         })
         .collect();
     // Robust centre and spread (median, 1.4826 · MAD = σ for a normal distribution): gross outliers

@@ -1,6 +1,6 @@
 //! End-to-end reconstruction on synthetic shapes with analytic truth and on the shipped real data.
 
-mod common;
+use crate::common;
 
 use rbfsurf::geometry::PointCloud;
 use rbfsurf::geometry::synthetic::Shape;

@@ -1,5 +1,5 @@
 //! Long-running fuzz soak of the point-file parsers (ignored by default; run with
-//! `SOAK_ITERS=1000000 cargo test --test parser_soak -- --ignored --nocapture`): seeded random
+//! `SOAK_ITERS=1000000 cargo test --test library parser_soak -- --ignored --nocapture`): seeded random
 //! mutations (byte flips, insertions, deletions, truncation, splices of header keywords) of valid
 //! PLY (ascii + binary), XYZ, CSV, PTS and OBJ inputs, plus pure random bytes, through
 //! `parse_point_cloud` with small limits. Any panic fails; the counts of accepted/refused inputs

@@ -1,13 +1,17 @@
-//! Input cleaning: drop non-finite points, merge duplicates, reject degenerate clouds.
+//! Stage "clean": drop non-finite points, merge duplicates, reject degenerate clouds, and
+//! (optionally) remove statistical outliers ([`outliers`]). It sits above [`crate::spatial`],
+//! whose index finds the duplicates and neighbours.
 //!
 //! Duplicates: a point is dropped when an earlier point (lower index) lies within `tolerance`
 //! (relative to the bbox diagonal) — deterministic, parallel, `O(n log n)`. Degeneracy is judged
 //! by PCA after cleaning: collinear clouds are refused; coplanar ones need normals.
 
-use super::pca::pca;
-use super::{Aabb, Point3, PointCloud, normalized};
+use crate::geometry::pca::pca;
+use crate::geometry::{Aabb, Point3, PointCloud, normalized};
 use crate::spatial::{IndexKind, SpatialError, build_index};
 use rayon::prelude::*;
+
+pub mod outliers;
 
 /// Cleaning parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

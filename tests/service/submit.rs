@@ -1,7 +1,7 @@
 //! `rbfsurf submit` against a real listener: success writes the mesh and report (exit 0); an
 //! unreconstructable file, a bad parameter, a missing token and an unreachable server exit non-zero.
 
-mod server_common;
+use crate::server_common;
 
 use server_common::{sphere_xyz, start_on};
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! The command line as a user meets it: bad input gives one line on stderr, a non-zero exit code and
 //! no output file; good input gives a GLB and a report with the contract keys.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,0 +1,152 @@
+//! Read → reconstruct → write as one stage: the single run-to-file path of the command line, the
+//! HTTP service and any embedding program. It checks the scale before reading (from the header's
+//! point count), reads the points, reconstructs, writes the mesh and the report atomically (a
+//! temporary file renamed into place, so a failed or cancelled run leaves no partial output) and
+//! fills the report's `read`, `write` and `total` timings and the peak memory, measured once here.
+
+use crate::error::{ErrorKind, ReconError};
+use crate::io::{
+    IoError, MeshFormat, PointFormat, ReadLimits, parse_point_cloud, peek_point_count,
+    read_point_cloud, write_atomic, write_mesh,
+};
+use crate::params::ReconParams;
+use crate::progress::{Progress, Stage};
+use crate::report::{Report, peak_rss_mib};
+use std::path::Path;
+use std::time::Instant;
+
+/// Where the points come from.
+#[derive(Debug, Clone, Copy)]
+pub enum PointSource<'a> {
+    /// A point file; its format comes from its content and extension. Errors name the path.
+    File(&'a Path),
+    /// Points in memory (an upload) in a known format. Errors name the source `<input>`.
+    Bytes {
+        /// The file's bytes.
+        data: &'a [u8],
+        /// Their format.
+        format: PointFormat,
+    },
+}
+
+impl PointSource<'_> {
+    /// How errors and the result line name this input.
+    pub fn name(&self) -> String {
+        match self {
+            PointSource::File(p) => p.display().to_string(),
+            PointSource::Bytes { .. } => "<input>".to_string(),
+        }
+    }
+}
+
+/// Where the results go.
+#[derive(Debug, Clone, Copy)]
+pub struct RunOutput<'a> {
+    /// The mesh file.
+    pub mesh: &'a Path,
+    /// Its format.
+    pub format: MeshFormat,
+    /// The JSON report, when wanted.
+    pub report: Option<&'a Path>,
+}
+
+/// What a finished run produced (the files are written).
+#[derive(Debug, Clone)]
+pub struct RunSummary {
+    /// The report as written (timings include reading and writing).
+    pub report: Report,
+    /// Triangles in the written mesh.
+    pub triangles: usize,
+}
+
+/// Why a run stopped; nothing was left at the output paths.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// Reading the input failed or it is over a limit.
+    #[error(transparent)]
+    Read(IoError),
+    /// The reconstruction failed, was refused or was cancelled.
+    #[error("{input}: {source}")]
+    Reconstruct {
+        /// The input's name.
+        input: String,
+        /// The stage error.
+        source: ReconError,
+    },
+    /// Writing the mesh or the report failed.
+    #[error(transparent)]
+    Write(IoError),
+}
+
+impl RunError {
+    /// Whose failure this is; the HTTP layer maps it to a status, the command line to its message.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            RunError::Read(e) => e.kind(),
+            RunError::Reconstruct { source, .. } => source.kind(),
+            RunError::Write(_) => ErrorKind::Internal,
+        }
+    }
+}
+
+/// Reconstruct the points of `source` with `params` under `limits` (the reader's point, byte and
+/// memory limits; `params.max_memory_mib` also bounds the reconstruction) and write the mesh and
+/// report to `output`. A cancellation noticed by any stage returns a [`RunError`] of kind
+/// [`ErrorKind::Cancelled`] and writes nothing.
+pub fn run(
+    source: PointSource<'_>,
+    params: &ReconParams,
+    limits: &ReadLimits,
+    output: &RunOutput<'_>,
+    progress: &dyn Progress,
+) -> Result<RunSummary, RunError> {
+    let start = Instant::now();
+    let input = source.name();
+    let recon_err = |source: ReconError| RunError::Reconstruct {
+        input: input.clone(),
+        source,
+    };
+    params.validate().map_err(|e| recon_err(e.into()))?;
+    progress.stage(Stage::Read);
+    let cloud = match source {
+        PointSource::File(path) => {
+            // Refuse a scan whose points alone cannot fit the budget before reading it.
+            let hint = peek_point_count(path).map_err(RunError::Read)?;
+            hint.check_budget(limits, path).map_err(RunError::Read)?;
+            super::check_scale(hint.points, params.max_memory_mib).map_err(recon_err)?;
+            read_point_cloud(path, limits).map_err(RunError::Read)?
+        }
+        PointSource::Bytes { data, format } => {
+            parse_point_cloud(data, format, limits).map_err(RunError::Read)?
+        }
+    };
+    let read_s = start.elapsed().as_secs_f64();
+    let mut rec = super::reconstruct(&cloud, params, progress).map_err(recon_err)?;
+    drop(cloud);
+    super::check_cancel(progress).map_err(recon_err)?;
+    progress.stage(Stage::Write);
+    let t = Instant::now();
+    write_mesh(output.mesh, &rec.mesh, output.format).map_err(RunError::Write)?;
+    rec.report.timings_s.read = read_s;
+    rec.report.timings_s.write = t.elapsed().as_secs_f64();
+    rec.report.timings_s.total = start.elapsed().as_secs_f64();
+    rec.report.memory.peak_rss_mib = peak_rss_mib();
+    if let Some(path) = output.report {
+        let json = serde_json::to_vec_pretty(&rec.report).map_err(|e| {
+            RunError::Write(IoError::Encode {
+                format: "JSON report",
+                message: e.to_string(),
+            })
+        })?;
+        if let Err(e) = write_atomic(path, &json) {
+            // The mesh without its report would be half a result: take it back.
+            let _ = std::fs::remove_file(output.mesh);
+            return Err(RunError::Write(e));
+        }
+    }
+    progress.fraction(1.0);
+    Ok(RunSummary {
+        triangles: rec.mesh.triangles.len(),
+        report: rec.report,
+    })
+}

@@ -1,0 +1,10 @@
+//! Integration tests of the library alone (no command line, no server): end-to-end reconstruction
+//! against analytic truth and the shipped data, the large-scan machinery, the parser soak.
+//! One test binary, so the crate is linked once (`cargo test --test library`).
+
+#[path = "../common/mod.rs"]
+mod common;
+mod large;
+mod parser_soak;
+mod pipeline;
+mod run;

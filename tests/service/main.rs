@@ -1,0 +1,12 @@
+//! Integration tests of the command line and the HTTP service (features `cli` and `server`):
+//! the binary as a user meets it, the API in-process and on a real listener, `rbfsurf submit`.
+//! One test binary, so the crate is linked once (`cargo test --test service`).
+
+mod cli;
+#[path = "../common/mod.rs"]
+mod common;
+mod http;
+mod load;
+#[path = "../server_common/mod.rs"]
+mod server_common;
+mod submit;
