@@ -625,10 +625,11 @@ mod tests {
         ));
     }
 
-    /// Mann §2.3: normalising the coordinates changes the condition number, not the curve. Our
-    /// fit always normalises, so data scaled by 1000 gives the same field up to the scale.
+    /// Mann §2.3: the raw system's condition number depends on the scale of the coordinates, the
+    /// curve does not. Our fit always normalises, so data scaled by 1000 give the same system
+    /// (condition number) and the same field up to the scale.
     #[test]
-    fn scale_invariance() {
+    fn scaled_data_give_the_same_system_and_curve() {
         let s = datasets::shen27();
         let big: Vec<Sample<2>> = s
             .iter()
