@@ -5,7 +5,8 @@
 //! - `off18`: unsigned angle to the true line above 18° (PCA errors, independent of orientation).
 //!
 //! Run with `cargo run --release --example normal_flips [-- DATA_DIR]` (default data directory
-//! `../shared/data`). Sets whose file is missing are skipped.
+//! `../shared/data`). Sets whose file is missing are skipped. `ONLY=text` keeps the generated sets
+//! whose name contains `text`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,7 +36,11 @@ fn main() {
             row(name, &cloud);
         }
     }
+    let only = std::env::var("ONLY").ok();
     for (name, cloud) in generated() {
+        if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
+            continue;
+        }
         row(&name, &cloud);
     }
 }
@@ -96,7 +101,10 @@ fn generated() -> Vec<(String, PointCloud)> {
         radius: 0.2,
         gap: 0.005,
     };
-    sets.push(("two spheres gap 0.005 8000".into(), touching.sample(8000, 7)));
+    sets.push((
+        "two spheres gap 0.005 8000".into(),
+        touching.sample(8000, 7),
+    ));
     let sphere = Shape::by_name("sphere").expect("sphere");
     sets.push((
         "pancake 1:20 10000".into(),
