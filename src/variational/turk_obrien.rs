@@ -23,9 +23,9 @@ use super::constraints::{
     PseudoNormalParams, Sample, ValueConstraint, VariationalError, check_affine_rank,
     expand_pseudo_normals, validate_samples,
 };
-use super::dense::{SymmetricSolver, lower_from_fn};
 use super::kernel::{RadialKernel, RbfExpansion};
 use super::{BallSign, Frame, ImplicitField};
+use crate::linalg::dense::{SymmetricSolver, lower_from_fn};
 
 /// How the normals of the samples are used.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -459,9 +459,9 @@ fn solve_hermite<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::polygonize::marching_squares::{Grid2, MarchingParams, Polyline, contour};
     use crate::variational::constraints::{Offset, Sides};
     use crate::variational::datasets;
-    use crate::variational::marching_squares::{Grid2, MarchingParams, Polyline, contour};
 
     fn loops(fit: &TurkObrienFit<2>, n: usize) -> Vec<Polyline> {
         let g = Grid2 {
