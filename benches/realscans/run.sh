@@ -17,7 +17,9 @@
 #   POISSON_BIN  native PoissonRecon (github.com/mkazhdan/PoissonRecon, built OUTSIDE this repository;
 #                default /tmp/PoissonRecon/Bin/Linux/PoissonRecon). If missing, the peer is Open3D's
 #                screened Poisson (benches/poisson.py) instead; the table says which.
-#   POISSON_DEPTH (default 10)   TIMEOUT per run in seconds (default 300)
+#   POISSON_DEPTH (default 10)   TIMEOUT per rbfsurf run in seconds (default 300; a run that takes
+#                longer is recorded as TIMEOUT: a hang or a pathological slowdown)
+#   PEER_TIMEOUT per peer run (default 600)
 #   SCRATCH      outputs (default target/realscans/out)   VENV (default benches/.venv-open3d)
 # Inputs without normals: the peer gets normals from Open3D (15-NN PCA + consistent tangent plane
 # orientation, benches/realscans/normals.py); its time is reported apart and included in "peer s".
@@ -44,6 +46,7 @@ MANIFEST=$DATA/manifest.tsv
 (cd "$DATA" && sha256sum -c --quiet SHA256SUMS) || { echo "inputs differ from $DATA/SHA256SUMS: rerun prepare.sh" >&2; exit 2; }
 SCRATCH=${SCRATCH:-$DATA/out}
 TIMEOUT=${TIMEOUT:-300}
+PEER_TIMEOUT=${PEER_TIMEOUT:-600}
 POISSON_DEPTH=${POISSON_DEPTH:-10}
 POISSON_BIN=${POISSON_BIN:-/tmp/PoissonRecon/Bin/Linux/PoissonRecon}
 VENV=${VENV:-benches/.venv-open3d}
@@ -69,6 +72,7 @@ if [[ $PEER == 1 ]]; then
   fi
 fi
 echo "rbfsurf: $BIN; peer: $PEER_KIND" >&2
+LOAD0=$(cut -d' ' -f1-3 /proc/loadavg)
 
 json() {  # json FILE KEY.PATH -> value or '-'
   python3 - "$1" "$2" << 'EOF'
@@ -83,13 +87,32 @@ except Exception:
 EOF
 }
 now() { date +%s.%N; }
+# timed TIMEFILE CMD... : runs CMD under GNU time (wall, user, sys seconds into TIMEFILE) when present
+TIME_BIN=/usr/bin/time
+[[ -x $TIME_BIN ]] || { [[ $(id -u) == 0 ]] && apt-get install -y -qq time > /dev/null 2>&1; } || true
+timed() {
+  local tf=$1; shift
+  if [[ -x $TIME_BIN ]]; then "$TIME_BIN" -f '%e %U %S' -o "$tf" "$@"; else : > "$tf"; "$@"; fi
+}
+cpu_of() {  # cpu_of TIMEFILE... -> summed user+sys seconds, or '-'
+  python3 -c '
+import sys
+tot, ok = 0.0, False
+for p in sys.argv[1:]:
+    try:
+        w, u, s = open(p).read().strip().split("\n")[-1].split()[:3]
+        tot += float(u) + float(s); ok = True
+    except Exception:
+        pass
+print(round(tot, 2) if ok else "-")' "$@"
+}
 elapsed() { python3 -c "print(round($(now) - $1, 2))"; }
 
 # measure NAME TOOL MESH INPUT REF SECONDS STATUS EXTRA -> one TSV row
 # columns: name tool status seconds extra comps watertight genus boundary_loops nm_vertices
-#          nm_edges triangles mesh_to_scan chamfer_truth
+#          nm_edges triangles mesh_to_scan chamfer_truth cpu_seconds
 measure() {
-  local name=$1 tool=$2 mesh=$3 in=$4 ref=$5 secs=$6 status=$7 extra=$8
+  local name=$1 tool=$2 mesh=$3 in=$4 ref=$5 secs=$6 status=$7 extra=$8 cpu=${9:--}
   local c="$SCRATCH/$name-$tool.cmp.json" t="$SCRATCH/$name-$tool.truth.json"
   local topo="- - - - - - -" m2s=- cham=-
   if [[ $status == ok ]] && timeout "$TIMEOUT" "$BIN" compare "$mesh" "$in" --json > "$c" 2> "$c.err"; then
@@ -101,14 +124,14 @@ measure() {
       timeout "$TIMEOUT" "$BIN" compare "$mesh" "$ref" --json > "$t" 2> "$t.err" && cham=$(json "$t" chamfer_rel)
     fi
   fi
-  printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$name" "$tool" "$status" "$secs" "$extra" "${topo// /$'\t'}" "$m2s" "$cham" >> "$ROWS"
-  echo "  $tool: $status ${secs}s [comps watertight genus loops nmv nme tris] = $topo, mesh->scan $m2s, truth $cham" >&2
+  printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$name" "$tool" "$status" "$secs" "$extra" "${topo// /$'\t'}" "$m2s" "$cham" "$cpu" >> "$ROWS"
+  echo "  $tool: $status ${secs}s (cpu ${cpu}s) [comps watertight genus loops nmv nme tris] = $topo, mesh->scan $m2s, truth $cham" >&2
 }
 
-status_of() {  # status_of RC ERRFILE
-  local rc=$1 err=$2
+status_of() {  # status_of RC ERRFILE [LIMIT_S]
+  local rc=$1 err=$2 limit=${3:-$TIMEOUT}
   if [[ $rc == 0 ]]; then echo ok
-  elif [[ $rc == 124 ]]; then echo "HANG(>${TIMEOUT}s)"
+  elif [[ $rc == 124 ]]; then echo "TIMEOUT(>${limit}s)"
   elif grep -q "panicked" "$err" 2> /dev/null; then echo "PANIC"
   elif [[ $rc -ge 128 ]]; then echo "CRASH(signal $((rc - 128)))"
   else echo "error(rc $rc)"; fi
@@ -131,10 +154,10 @@ EOF
   out="$SCRATCH/$name-rbfsurf.glb" rep="$SCRATCH/$name-rbfsurf.json" err="$SCRATCH/$name-rbfsurf.err"
   rm -f "$out" "$rep"
   t0=$(now); rc=0
-  timeout "$TIMEOUT" "$BIN" reconstruct "$in" -o "$out" --report "$rep" --quiet 2> "$err" || rc=$?
+  timed "$SCRATCH/$name-rbfsurf.time" timeout "$TIMEOUT" "$BIN" reconstruct "$in" -o "$out" --report "$rep" --quiet 2> "$err" || rc=$?
   secs=$(elapsed "$t0"); st=$(status_of $rc "$err")
   [[ $st == ok ]] || echo "  rbfsurf $st: $(tail -n 2 "$err" | tr '\n' ' ')" >&2
-  measure "$name" rbfsurf "$out" "$in" "$ref" "$secs" "$st" "-"
+  measure "$name" rbfsurf "$out" "$in" "$ref" "$secs" "$st" "-" "$(cpu_of "$SCRATCH/$name-rbfsurf.time")"
   # peer
   if [[ $PEER_KIND != none ]]; then
     pout="$SCRATCH/$name-poisson.ply" perr="$SCRATCH/$name-poisson.err" rc=0
@@ -142,28 +165,35 @@ EOF
     if [[ $PEER_KIND == native ]]; then
       oriented="$SCRATCH/$name-oriented.ply"
       nsecs=-
-      if "$VENV/bin/python" benches/realscans/normals.py "$in" "$oriented" > "$SCRATCH/$name-normals.json" 2> "$perr"; then
-        nsecs=$(json "$SCRATCH/$name-normals.json" seconds)
+      t0=$(now)
+      if timed "$SCRATCH/$name-normals.time" "$VENV/bin/python" benches/realscans/normals.py "$in" "$oriented" > "$SCRATCH/$name-normals.json" 2> "$perr"; then
+        nsecs=$(elapsed "$t0")
         t0=$(now)
-        timeout "$TIMEOUT" "$POISSON_BIN" --in "$oriented" --out "$pout" --depth "$POISSON_DEPTH" > "$SCRATCH/$name-poisson.log" 2>> "$perr" || rc=$?
+        # OMP_WAIT_POLICY=PASSIVE: no spinning OpenMP threads on a shared, loaded machine
+        OMP_WAIT_POLICY=PASSIVE timed "$SCRATCH/$name-poisson.time" timeout "$PEER_TIMEOUT" "$POISSON_BIN" --in "$oriented" --out "$pout" --depth "$POISSON_DEPTH" > "$SCRATCH/$name-poisson.log" 2>> "$perr" || rc=$?
         psecs=$(elapsed "$t0")
-        [[ $normals == yes ]] && nsecs=0
-        secs=$(python3 -c "print(round($psecs + $nsecs, 2))")
+        if [[ $normals == yes ]]; then
+          secs=$psecs pcpu=$(cpu_of "$SCRATCH/$name-poisson.time")
+        else
+          secs=$(python3 -c "print(round($psecs + $nsecs, 2))")
+          pcpu=$(cpu_of "$SCRATCH/$name-poisson.time" "$SCRATCH/$name-normals.time")
+        fi
       else
-        rc=1 secs=-
+        rc=1 secs=- pcpu=-
       fi
-      extra="normals ${nsecs}s"
+      extra="Open3D normals ${nsecs}s"
       [[ $normals == yes ]] && extra="given normals"
     else
       t0=$(now)
-      timeout "$TIMEOUT" "$VENV/bin/python" benches/poisson.py "$in" "$pout" --depth "$POISSON_DEPTH" > "$SCRATCH/$name-poisson.json" 2> "$perr" || rc=$?
-      secs=$(elapsed "$t0")
+      timed "$SCRATCH/$name-poisson.time" timeout "$PEER_TIMEOUT" "$VENV/bin/python" benches/poisson.py "$in" "$pout" --depth "$POISSON_DEPTH" > "$SCRATCH/$name-poisson.json" 2> "$perr" || rc=$?
+      secs=$(elapsed "$t0") pcpu=$(cpu_of "$SCRATCH/$name-poisson.time")
       extra="$( [[ $normals == yes ]] && echo 'given normals' || echo 'Open3D normals')"
     fi
-    st=$(status_of $rc "$perr")
-    measure "$name" "poisson-d$POISSON_DEPTH" "$pout" "$in" "$ref" "$secs" "$st" "$extra"
+    st=$(status_of $rc "$perr" "$PEER_TIMEOUT")
+    measure "$name" "poisson-d$POISSON_DEPTH" "$pout" "$in" "$ref" "$secs" "$st" "$extra" "${pcpu:--}"
   fi
 done < "$MANIFEST"
 
-python3 benches/realscans/table.py "$MANIFEST" "$ROWS" "$OUTMD" "$LABEL" "$PEER_KIND" "$POISSON_DEPTH"
+LOAD="load average (1/5/15 min) at start $LOAD0, at end $(cut -d' ' -f1-3 /proc/loadavg)"
+python3 benches/realscans/table.py "$MANIFEST" "$ROWS" "$OUTMD" "$LABEL" "$PEER_KIND" "$POISSON_DEPTH" "$LOAD"
 echo "written $OUTMD (rows: $ROWS, meshes in $SCRATCH)" >&2
