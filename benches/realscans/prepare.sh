@@ -84,6 +84,17 @@ if [[ -x $BIN ]]; then
 else
   echo "no rbfsurf binary at $BIN: synthetic inputs skipped" >&2
 fi
+# 5. the floor of the mesh->scan measure: the truth mesh's own distance to the points (half the point
+#    spacing, roughly), for the inputs that have a truth mesh
+if [[ -x $BIN ]]; then
+  : > "$OUT/floors.tsv"
+  while IFS=$'\t' read -r name in ref _; do
+    [[ $ref == - || $ref == onesided:* ]] && continue
+    "$BIN" compare "$ref" "$in" --json 2> /dev/null \
+      | python3 -c 'import json,sys; print(sys.argv[1] + "\t" + str(json.load(sys.stdin)["mesh_to_ref_mean_rel"]))' "$name" \
+      >> "$OUT/floors.tsv" || true
+  done < "$OUT/manifest.tsv"
+fi
 (cd "$OUT" && find . -maxdepth 2 -type f \( -name '*.ply' -o -name '*.xyz' -o -name '*.off' \) \
-  -not -path './cache/*' | sort | xargs sha256sum > SHA256SUMS)
+  -not -path './cache/*' -not -path './out/*' | sort | xargs sha256sum > SHA256SUMS)
 echo "$(wc -l < "$OUT/manifest.tsv") inputs in $OUT/manifest.tsv" >&2
