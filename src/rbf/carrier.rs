@@ -413,7 +413,7 @@ impl LocalCarrier {
             })
             .count();
         if within >= FAR_NEIGHBOURS {
-            return self.blend(x, candidates.iter().map(|&j| j as usize), self.radius, None);
+            return self.blend(x, candidates, self.radius, None);
         }
         // Fewer than K usable points within R: widen the weights to the K nearest ones.
         let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
@@ -421,60 +421,48 @@ impl LocalCarrier {
         let Some(&(kth, rho)) = knn.last() else {
             return (0.0, [0.0; 3]);
         };
+        let ids: Vec<u32> = knn
+            .iter()
+            .map(|&(i, _)| self.valid_ids[i as usize])
+            .collect();
         if rho <= self.radius {
             // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
-            return self.blend(
-                x,
-                knn.iter()
-                    .map(|&(i, _)| self.valid_ids[i as usize] as usize),
-                self.radius,
-                None,
-            );
+            return self.blend(x, &ids, self.radius, None);
         }
         let far = self.points[self.valid_ids[kth as usize] as usize];
         let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
-        self.blend(
-            x,
-            knn.iter()
-                .map(|&(i, _)| self.valid_ids[i as usize] as usize),
-            rho,
-            Some(grad_rho),
-        )
+        self.blend(x, &ids, rho, Some(grad_rho))
     }
 
     /// `g = Σ w_j n_j·(x − p_j) / Σ w_j` and its gradient over the points `ids` with
     /// `w_j = ψ(|x − p_j| / ρ)`; `grad_rho` is `∇ρ` when the radius depends on `x` (`None`: fixed).
-    fn blend(
-        &self,
-        x: &Point3,
-        ids: impl Iterator<Item = usize>,
-        rho: f64,
-        grad_rho: Option<Point3>,
-    ) -> (f64, Point3) {
+    fn blend(&self, x: &Point3, ids: &[u32], rho: f64, grad_rho: Option<Point3>) -> (f64, Point3) {
         let (r2, inv_r) = (rho * rho, 1.0 / rho);
         let (mut sw, mut swd) = (0.0, 0.0);
         let (mut sg, mut sdw) = ([0.0; 3], [0.0; 3]);
-        for j in ids {
+        for &j in ids {
+            let j = j as usize;
             let diff = sub(*x, self.points[j]);
             let d2 = dot(diff, diff);
-            if d2 >= r2 || self.normals[j] == [0.0; 3] {
+            let n = self.normals[j];
+            if d2 >= r2 || n == [0.0; 3] {
                 continue;
             }
             let t = d2.sqrt() * inv_r;
             let w = Kernel::WendlandC2.value(t);
             let dw_over = Kernel::WendlandC2.derivative_over_r(t) * inv_r * inv_r;
-            // ∇w = ψ'(t)/t · [(x − p)/ρ² − |x − p|²/ρ³ ∇ρ]
+            // ∇ψ(|x − p|/ρ) = ψ'(t)/t · [(x − p)/ρ² − |x − p|²/ρ³ ∇ρ]
             let mut dw = [dw_over * diff[0], dw_over * diff[1], dw_over * diff[2]];
             if let Some(gr) = grad_rho {
                 for k in 0..3 {
                     dw[k] -= dw_over * d2 * inv_r * gr[k];
                 }
             }
-            let dist = dot(self.normals[j], diff);
+            let dist = dot(n, diff);
             sw += w;
             swd += w * dist;
             for k in 0..3 {
-                sg[k] += w * self.normals[j][k] + dw[k] * dist;
+                sg[k] += w * n[k] + dw[k] * dist;
                 sdw[k] += dw[k];
             }
         }
@@ -593,6 +581,33 @@ mod tests {
                         g[k]
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn one_bad_normal_makes_no_pocket_off_the_data() {
+        // A sphere of radius 0.3 with one normal turned 87° (as PCA gives on a thin ear): off the
+        // data, beyond the band R, the carrier must stay positive outside the sphere.
+        let (p, mut n) = sphere_points(2000, [0.5; 3], 0.3);
+        let bad = 1000;
+        let u = n[bad];
+        let t = normalized([u[1], -u[0], 0.0]).unwrap();
+        n[bad] = normalized([0.05 * u[0] + t[0], 0.05 * u[1] + t[1], 0.05 * u[2] + t[2]]).unwrap();
+        let r = 0.04;
+        let c = local(&p, &n, r);
+        for s in [1.2, 1.6, 2.5, 4.0] {
+            for dir in [t, [-t[0], -t[1], -t[2]]] {
+                // Off the bad point, outward by s·R and sideways along its wrong plane.
+                let x = [
+                    p[bad][0] + s * r * (u[0] + 0.3 * dir[0]),
+                    p[bad][1] + s * r * (u[1] + 0.3 * dir[1]),
+                    p[bad][2] + s * r * (u[2] + 0.3 * dir[2]),
+                ];
+                let outside = norm(sub(x, [0.5; 3])) - 0.3;
+                assert!(outside > 0.0);
+                let (g, _) = c.value_gradient(&x);
+                assert!(g > 0.0, "g = {g} at {x:?}, {outside} outside the sphere");
             }
         }
     }
