@@ -52,7 +52,7 @@ pub fn estimate_noise(
     spacing: f64,
     nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
 ) -> NoiseEstimate {
-    if points.len() < 4 * LARGE_K || !(spacing > 0.0) {
+    if points.len() < 4 * LARGE_K || spacing.is_nan() || spacing <= 0.0 {
         return NoiseEstimate::default();
     }
     let small = median_residual(points, SMALL_K, &nearest_k);
@@ -116,7 +116,7 @@ fn quadric_residual(nb: &[Point3]) -> Option<f64> {
         .map(|q| crate::geometry::dist2(*q, p.centroid))
         .fold(0.0, f64::max)
         .sqrt();
-    if !(reach > 0.0) {
+    if reach.is_nan() || reach <= 0.0 {
         return None;
     }
     let rows: Vec<([f64; 6], f64)> = nb
