@@ -143,8 +143,10 @@ fn push_accessor(
 /// Encodes a mesh as GLB bytes (glTF 2.0 binary), then decodes the result and checks the vertex
 /// and index counts (an error, not a panic, if they differ).
 ///
-/// Coordinates are converted from f64 to f32; normals are written unit length when
-/// `mesh.normals` is non-empty. Fails with [`IoError::Encode`] on an empty mesh, out-of-range
+/// Coordinates are converted from f64 to f32; vertices that round to the same f32 position are merged
+/// first and the triangles that then repeat a corner dropped (so no zero-area triangle appears when
+/// the file is read back and welded); normals are written unit length when `mesh.normals` is
+/// non-empty. Fails with [`IoError::Encode`] on an empty mesh, out-of-range
 /// indices or coordinates that are not finite in f32.
 ///
 /// ```
@@ -156,6 +158,9 @@ fn push_accessor(
 /// assert_eq!(rbfsurf::io::decode_glb(&glb).unwrap().triangles, mesh.triangles);
 /// ```
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    check_mesh(mesh, "GLB")?;
+    let merged = super::snap::merge_f32_duplicates(mesh);
+    let mesh: &TriMesh = &merged;
     check_mesh(mesh, "GLB")?;
     let (pos, bounds) = f32_positions(mesh)?;
     let normals = unit_normals(mesh);
