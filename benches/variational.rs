@@ -5,7 +5,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use rbfsurf::variational::marching_squares::{Grid2, MarchingParams, contour};
+use rbfsurf::polygonize::marching_squares::{Grid2, MarchingParams, contour};
 use rbfsurf::variational::workbench::{contour_field, fit_curve, grid_for};
 use rbfsurf::variational::{
     CurveMethod, CurveParams, ImplicitField, IncrementalSystem, Offset, Origin, RadialKernel,

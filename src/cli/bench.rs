@@ -24,11 +24,13 @@ use std::time::Instant;
 /// Arguments of `bench`.
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
-    /// `table1` or `scaling`.
-    pub which: String,
-    /// The bunny point set (37,706 points).
-    #[arg(long, default_value = "data/bunny_cgal.ply")]
-    pub bunny: PathBuf,
+    /// Which benchmark.
+    #[arg(value_enum)]
+    pub which: BenchKind,
+    /// The bunny point set (37,706 points; default: `data/bunny_cgal.ply` of the working
+    /// directory, else of the source tree the binary was built from).
+    #[arg(long)]
+    pub bunny: Option<PathBuf>,
     /// Sizes for `scaling` (the bunny's size uses the bunny, others a synthetic torus).
     #[arg(
         long,
@@ -41,11 +43,34 @@ pub struct BenchArgs {
     pub repeat: usize,
 }
 
+/// The benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchKind {
+    /// The seed's Table 1 on bunny subsets.
+    Table1,
+    /// N = 10k..300k (bunny and synthetic torus).
+    Scaling,
+}
+
 pub fn run(a: &BenchArgs) -> Result<()> {
-    match a.which.as_str() {
-        "table1" => table1(a),
-        "scaling" => scaling(a),
-        w => bail!("unknown benchmark '{w}': use table1 or scaling"),
+    match a.which {
+        BenchKind::Table1 => table1(a),
+        BenchKind::Scaling => scaling(a),
+    }
+}
+
+/// The bunny file: `--bunny`, else `data/bunny_cgal.ply` here, else in the source tree.
+fn bunny_path(a: &BenchArgs) -> Result<PathBuf> {
+    if let Some(p) = &a.bunny {
+        return Ok(p.clone());
+    }
+    let here = PathBuf::from("data/bunny_cgal.ply");
+    let source = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/data/bunny_cgal.ply"));
+    match [here, source].into_iter().find(|p| p.is_file()) {
+        Some(p) => Ok(p),
+        None => bail!(
+            "data/bunny_cgal.ply not found here nor in the source tree; pass --bunny PATH (the file ships in the repository's data/)"
+        ),
     }
 }
 
@@ -63,8 +88,9 @@ fn random_subset(cloud: &PointCloud, n: usize, seed: u64) -> PointCloud {
 }
 
 fn table1(a: &BenchArgs) -> Result<()> {
-    let bunny = read_point_cloud(&a.bunny, &ReadLimits::default())
-        .with_context(|| a.bunny.display().to_string())?;
+    let path = bunny_path(a)?;
+    let bunny = read_point_cloud(&path, &ReadLimits::default())
+        .with_context(|| path.display().to_string())?;
     let params = ReconParams {
         kernel: Kernel::WendlandC0,
         support: Support::Radius(0.2),
@@ -187,10 +213,11 @@ fn scaling(a: &BenchArgs) -> Result<()> {
     );
     outln!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut solver_rows = Vec::new();
+    let bunny = bunny_path(a).ok();
     for &n in &a.sizes {
-        let (cloud, label) = if n == 37_706 && a.bunny.exists() {
+        let (cloud, label) = if let (37_706, Some(path)) = (n, &bunny) {
             (
-                read_point_cloud(&a.bunny, &ReadLimits::default())?,
+                read_point_cloud(path, &ReadLimits::default())?,
                 "bunny".to_string(),
             )
         } else {

@@ -61,12 +61,12 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         outln!("hausdorff_rel {:.3e}", r.hausdorff_rel);
         outln!("samples       {}", r.samples);
         outln!(
-            "mesh          {} vertices, {} triangles, {} component(s), watertight {}, genus {:?}",
+            "mesh          {} vertices, {} triangles, {} component(s), watertight {}, genus {}",
             mesh_topo.vertices,
             mesh_topo.triangles,
             mesh_topo.components,
             mesh_topo.watertight,
-            mesh_topo.genus
+            mesh_topo.genus_label()
         );
     }
     Ok(())

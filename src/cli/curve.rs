@@ -216,23 +216,10 @@ pub fn run(a: &CurveArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("adding the constraints of {}", path.display()))?
         }
     };
-    write_atomic(&a.output, out.svg.as_bytes())?;
+    crate::io::write_atomic(&a.output, out.svg.as_bytes())?;
     if let Some(r) = &a.report {
-        write_atomic(r, serde_json::to_string_pretty(&out.report)?.as_bytes())?;
+        crate::io::write_atomic(r, serde_json::to_string_pretty(&out.report)?.as_bytes())?;
     }
-    Ok(())
-}
-
-fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot write in {}", dir.display()))?;
-    std::io::Write::write_all(&mut tmp, bytes)?;
-    tmp.persist(path)
-        .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
 

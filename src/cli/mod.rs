@@ -137,4 +137,56 @@ mod tests {
     fn cli_definition_is_consistent() {
         Cli::command().debug_assert();
     }
+
+    /// The flags of `reconstruct` as a markdown table, from the same definitions that give
+    /// `--help` and the OpenAPI parameter descriptions.
+    fn reconstruct_flags_markdown() -> String {
+        let cmd = Cli::command();
+        let rec = cmd.find_subcommand("reconstruct").expect("reconstruct");
+        let mut out =
+            String::from("| flag | meaning (from `rbfsurf reconstruct --help`) |\n|---|---|\n");
+        for arg in rec.get_arguments() {
+            let Some(long) = arg.get_long() else { continue };
+            let help = arg.get_help().map(|h| h.to_string()).unwrap_or_default();
+            let value = match arg.get_action().takes_values() {
+                true => format!(
+                    " {}",
+                    arg.get_id().as_str().to_uppercase().replace('_', "-")
+                ),
+                false => String::new(),
+            };
+            out.push_str(&format!(
+                "| `--{long}{value}` | {} |\n",
+                help.replace('|', "\\|")
+            ));
+        }
+        out
+    }
+
+    /// docs/parameters.md carries the generated flag table between markers: help texts and the
+    /// docs cannot drift. `UPDATE_DOCS=1 cargo test --lib cli::` rewrites it.
+    #[test]
+    fn docs_parameter_table_matches_the_help_texts() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/parameters.md");
+        let doc = std::fs::read_to_string(&path).expect("docs/parameters.md");
+        let (begin, end) = (
+            "<!-- BEGIN generated flags -->\n",
+            "<!-- END generated flags -->",
+        );
+        let (a, b) = (
+            doc.find(begin).expect("begin marker") + begin.len(),
+            doc.find(end).expect("end marker"),
+        );
+        let want = reconstruct_flags_markdown();
+        if std::env::var_os("UPDATE_DOCS").is_some() {
+            let new = format!("{}{}{}", &doc[..a], want, &doc[b..]);
+            std::fs::write(&path, new).unwrap();
+            return;
+        }
+        assert_eq!(
+            &doc[a..b],
+            want,
+            "docs/parameters.md is out of date: run UPDATE_DOCS=1 cargo test --lib cli::"
+        );
+    }
 }

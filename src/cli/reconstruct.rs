@@ -77,7 +77,7 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         m.triangles,
         m.components,
         m.watertight,
-        m.genus.map_or("-".to_string(), |g| g.to_string()),
+        m.genus_label(),
         report.residual.max,
         report.timings_s.total
     );

@@ -35,28 +35,36 @@ pub struct TriMesh {
     pub triangles: Vec<[u32; 3]>,
 }
 
+// Vector helpers, generic over the dimension (3D here, 2D in the curve workbench); by value,
+// arrays being `Copy`. Sums run in index order from 0, so 3D results are bit-identical to the
+// written-out `a[0] * b[0] + a[1] * b[1] + a[2] * b[2]`.
+
 /// `a − b`.
 #[inline]
-pub fn sub(a: Point3, b: Point3) -> Point3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+pub fn sub<const D: usize>(a: [f64; D], b: [f64; D]) -> [f64; D] {
+    std::array::from_fn(|k| a[k] - b[k])
 }
 
 /// `a + b`.
 #[inline]
-pub fn add(a: Point3, b: Point3) -> Point3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+pub fn add<const D: usize>(a: [f64; D], b: [f64; D]) -> [f64; D] {
+    std::array::from_fn(|k| a[k] + b[k])
 }
 
 /// `s · a`.
 #[inline]
-pub fn scale(a: Point3, s: f64) -> Point3 {
-    [a[0] * s, a[1] * s, a[2] * s]
+pub fn scale<const D: usize>(a: [f64; D], s: f64) -> [f64; D] {
+    a.map(|v| v * s)
 }
 
 /// Dot product.
 #[inline]
-pub fn dot(a: Point3, b: Point3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+pub fn dot<const D: usize>(a: [f64; D], b: [f64; D]) -> f64 {
+    let mut s = a[0] * b[0];
+    for k in 1..D {
+        s += a[k] * b[k];
+    }
+    s
 }
 
 /// Cross product `a × b`.
@@ -71,25 +79,25 @@ pub fn cross(a: Point3, b: Point3) -> Point3 {
 
 /// Squared Euclidean norm.
 #[inline]
-pub fn norm2(a: Point3) -> f64 {
+pub fn norm2<const D: usize>(a: [f64; D]) -> f64 {
     dot(a, a)
 }
 
 /// Euclidean norm.
 #[inline]
-pub fn norm(a: Point3) -> f64 {
+pub fn norm<const D: usize>(a: [f64; D]) -> f64 {
     norm2(a).sqrt()
 }
 
 /// Squared distance between two points.
 #[inline]
-pub fn dist2(a: Point3, b: Point3) -> f64 {
+pub fn dist2<const D: usize>(a: [f64; D], b: [f64; D]) -> f64 {
     norm2(sub(a, b))
 }
 
 /// `a / |a|`, or `None` when `|a|` is zero or not finite.
 #[inline]
-pub fn normalized(a: Point3) -> Option<Point3> {
+pub fn normalized<const D: usize>(a: [f64; D]) -> Option<[f64; D]> {
     let n = norm(a);
     (n > 0.0 && n.is_finite()).then(|| scale(a, 1.0 / n))
 }

@@ -19,6 +19,7 @@
 
 mod bordered;
 mod cg;
+pub mod dense;
 mod envelope;
 mod envelope_kernels;
 mod ldl;
@@ -182,6 +183,16 @@ pub enum LinalgError {
         limit: usize,
         /// Estimated memory in bytes.
         bytes: u64,
+    },
+    /// A dense symmetric system is singular to working precision.
+    #[error(
+        "the {n}×{n} system is singular (reciprocal condition estimate {rcond:.3e}); remove nearly coincident or degenerate constraints"
+    )]
+    SingularDense {
+        /// System size.
+        n: usize,
+        /// Reciprocal 1-norm condition estimate.
+        rcond: f64,
     },
     /// Inputs have inconsistent sizes (non-square matrix, wrong vector or permutation length).
     #[error("dimension mismatch in {what}: expected {expected}, got {got}")]

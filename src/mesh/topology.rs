@@ -47,6 +47,15 @@ pub struct MeshTopology {
     pub genus: Option<i64>,
 }
 
+impl MeshTopology {
+    /// The genus as printed for people: the number, or `-` where it is undefined (open,
+    /// non-manifold or empty meshes).
+    pub fn genus_label(&self) -> String {
+        self.genus
+            .map_or_else(|| "-".to_string(), |g| g.to_string())
+    }
+}
+
 /// Disjoint-set forest with path halving and union by size.
 pub(crate) struct UnionFind {
     parent: Vec<u32>,

@@ -1,4 +1,5 @@
-//! Polygonization: extract the zero set of a scalar field as a closed triangle mesh.
+//! Polygonization: extract the zero set of a scalar field as a closed triangle mesh (3D), or as
+//! polylines ([`marching_squares`], 2D curves).
 //!
 //! Works on any [`ScalarField`] (it knows nothing of RBFs). Convention: `f < 0` inside,
 //! `f > 0` outside, so the gradient points outwards and triangles are wound counter-clockwise
@@ -51,6 +52,7 @@ mod block;
 mod extract;
 mod grid;
 mod kuhn;
+pub mod marching_squares;
 mod params;
 
 pub use band::DataBand;

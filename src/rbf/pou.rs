@@ -263,9 +263,26 @@ mod tests {
         let cloud = Shape::by_name("sphere").unwrap().sample(5000, 6);
         let plans = plan_blocks(&cloud.points, 800, 0.04);
         let blocks: Vec<PouBlock> = plans.iter().map(|p| block(p.core, 0.04)).collect();
+        let sum = |p: &Point3| blocks.iter().map(|b| b.weight(p).0).sum::<f64>();
         for p in &cloud.points {
-            let s: f64 = blocks.iter().map(|b| b.weight(p).0).sum();
-            assert!(s >= 1.0 - 1e-12, "sum {s}");
+            assert!(sum(p) >= 1.0 - 1e-12, "sum {} at a data point", sum(p));
+        }
+        // Everywhere in the cores' union, not only at the data: a uniform lattice of 41³ points
+        // (off the data, across every shared face and corner of the octree leaves).
+        let mut cube = plans[0].core;
+        for p in &plans {
+            cube.grow(&p.core.min);
+            cube.grow(&p.core.max);
+        }
+        let e = cube.extent();
+        for i in 0..=40 {
+            for j in 0..=40 {
+                for k in 0..=40 {
+                    let t = [i, j, k].map(|v| v as f64 / 40.0);
+                    let x = [0, 1, 2].map(|a| cube.min[a] + t[a] * e[a]);
+                    assert!(sum(&x) >= 1.0 - 1e-12, "sum {} at {x:?}", sum(&x));
+                }
+            }
         }
     }
 

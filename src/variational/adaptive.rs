@@ -14,8 +14,8 @@
 
 use rayon::prelude::*;
 
-use super::marching_squares::{Grid2, MarchingParams, Polyline, contour_values_batch};
 use super::{BallSign, ImplicitField};
+use crate::polygonize::marching_squares::{Grid2, MarchingParams, Polyline, contour_values_batch};
 
 /// Node values with how many were evaluated.
 #[derive(Debug, Clone, PartialEq)]
@@ -144,8 +144,8 @@ pub fn contour_adaptive(field: &dyn ImplicitField<2>, grid: &Grid2) -> Vec<Polyl
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::polygonize::marching_squares::contour;
     use crate::variational::datasets;
-    use crate::variational::marching_squares::contour;
     use crate::variational::turk_obrien::{TurkObrienParams, fit_turk_obrien};
     use crate::variational::workbench::{CurveParams, grid_for};
 

@@ -11,6 +11,7 @@
 //! for the affine-rank test. Reference: Mann, *A Study of Two Implicit Data Interpolation
 //! Schemes*, Waterloo CS-2013-09, §2–3.
 
+use crate::geometry::{dist2, dot, sub};
 use thiserror::Error;
 
 /// Errors of the variational fits, the curve workbench and the curve file reader.
@@ -146,6 +147,9 @@ pub enum VariationalError {
     /// The caller cancelled the work through its progress handle.
     #[error("cancelled")]
     Cancelled,
+    /// The dense solver failed otherwise.
+    #[error(transparent)]
+    Solver(crate::linalg::LinalgError),
     /// Network training produced a non-finite loss or gradient.
     #[error("training diverged at epoch {epoch} (non-finite loss); lower the learning rate or λ")]
     TrainingDiverged {
@@ -160,6 +164,17 @@ pub enum VariationalError {
         /// Comma-separated list of known names.
         known: String,
     },
+}
+
+impl From<crate::linalg::LinalgError> for VariationalError {
+    fn from(e: crate::linalg::LinalgError) -> Self {
+        match e {
+            crate::linalg::LinalgError::SingularDense { n, rcond } => {
+                VariationalError::SingularSystem { n, rcond }
+            }
+            other => VariationalError::Solver(other),
+        }
+    }
 }
 
 impl VariationalError {
@@ -371,7 +386,7 @@ pub fn check_coincident<const D: usize>(c: &[ValueConstraint<D>]) -> Result<(), 
             if c[j].p[0] - c[i].p[0] > tol {
                 break;
             }
-            if dist2(&c[i].p, &c[j].p) <= tol * tol {
+            if dist2(c[i].p, c[j].p) <= tol * tol {
                 return Err(coincidence_error(&c[i.min(j)], &c[i.max(j)]));
             }
         }
@@ -420,14 +435,14 @@ pub fn check_affine_rank<const D: usize>(
     let mut basis: Vec<[f64; D]> = Vec::with_capacity(D);
     let mut used = vec![rows[0]];
     for (k, p) in pts.iter().enumerate().skip(1) {
-        let mut v = sub(p, &pts[0]);
+        let mut v = sub(*p, pts[0]);
         for b in &basis {
-            let d = dot(&v, b);
+            let d = dot(v, *b);
             for (x, y) in v.iter_mut().zip(b) {
                 *x -= d * y;
             }
         }
-        let len = dot(&v, &v).sqrt();
+        let len = dot(v, v).sqrt();
         if len > tol {
             basis.push(v.map(|x| x / len));
             used.push(rows[k]);
@@ -456,7 +471,7 @@ pub fn median_spacing<const D: usize>(pts: &[[f64; D]]) -> f64 {
             pts.iter()
                 .enumerate()
                 .filter(|&(j, _)| j != i)
-                .map(|(_, q)| dist2(p, q))
+                .map(|(_, q)| dist2(*p, *q))
                 .fold(f64::INFINITY, f64::min)
                 .sqrt()
         })
@@ -467,7 +482,7 @@ pub fn median_spacing<const D: usize>(pts: &[[f64; D]]) -> f64 {
 
 /// Unit vector of `n` (caller guarantees non-zero length).
 pub fn unit<const D: usize>(n: &[f64; D]) -> [f64; D] {
-    let l = dot(n, n).sqrt();
+    let l = dot(*n, *n).sqrt();
     n.map(|x| x / l)
 }
 
@@ -537,24 +552,6 @@ pub fn offset_distance<const D: usize>(
         }
         Offset::Normalized(d) => d * unit_length,
     })
-}
-
-/// `a − b`.
-#[inline]
-pub fn sub<const D: usize>(a: &[f64; D], b: &[f64; D]) -> [f64; D] {
-    std::array::from_fn(|k| a[k] - b[k])
-}
-
-/// Dot product.
-#[inline]
-pub fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    (0..D).map(|k| a[k] * b[k]).sum()
-}
-
-/// Squared distance.
-#[inline]
-pub fn dist2<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    (0..D).map(|k| (a[k] - b[k]) * (a[k] - b[k])).sum()
 }
 
 #[cfg(test)]

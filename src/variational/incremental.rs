@@ -27,9 +27,9 @@ use faer::Mat;
 use super::constraints::{
     Origin, ValueConstraint, VariationalError, check_affine_rank, check_coincident,
 };
-use super::dense::{SymmetricSolver, lower_from_fn, symmetrize_lower};
 use super::kernel::{RadialKernel, RbfExpansion};
 use super::turk_obrien::value_matrix;
+use crate::linalg::dense::{SymmetricSolver, lower_from_fn, symmetrize_lower};
 
 /// A solved value-constraint system that accepts more constraints cheaply.
 #[derive(Clone)]

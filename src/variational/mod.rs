@@ -5,7 +5,7 @@
 //!   Hermite (gradient) constraints, and Mann's three-solve true-normal variant (CS-2013-09 §3.8).
 //! - [`incremental`]: add constraints to a solved system by a Schur complement (Jiang & Turk).
 //! - [`mls`]: Shen's moving-least-squares implicit (constant/linear × pseudo/true normals).
-//! - 2D curves workbench: [`marching_squares`], [`quality`], [`svg`], [`datasets`], [`curve_io`],
+//! - 2D curves workbench: contouring by [`crate::polygonize::marching_squares`], [`quality`], [`svg`], [`datasets`], [`curve_io`],
 //!   [`workbench`]; Jiang & Turk's neural approximator in [`mlp`]; 3D fields for the polygonizer in [`field3d`].
 //!
 //! Every fit works in normalised coordinates ([`Frame`]: bounding-box centre at the origin,
@@ -16,12 +16,10 @@ pub mod batch;
 pub mod constraints;
 pub mod curve_io;
 pub mod datasets;
-pub mod dense;
 pub mod editing;
 pub mod field3d;
 pub mod incremental;
 pub mod kernel;
-pub mod marching_squares;
 pub mod mlp;
 pub mod mls;
 pub mod quality;

@@ -15,7 +15,7 @@
 //! vertex for the curvature. 3D meshes get their component counts from the mesh stage.
 
 use super::constraints::Sample;
-use super::marching_squares::Polyline;
+use crate::polygonize::marching_squares::Polyline;
 
 /// Quality figures of a curve (serialised into the workbench report).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -171,7 +171,7 @@ pub fn analyse(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::variational::marching_squares::{Grid2, MarchingParams, contour};
+    use crate::polygonize::marching_squares::{Grid2, MarchingParams, contour};
 
     #[test]
     fn circle_quality_is_exact() {

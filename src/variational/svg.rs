@@ -6,7 +6,7 @@
 use std::fmt::Write;
 
 use super::constraints::{Origin, Sample, ValueConstraint};
-use super::marching_squares::Polyline;
+use crate::polygonize::marching_squares::Polyline;
 
 /// What to draw.
 pub struct SvgInput<'a> {

@@ -23,9 +23,9 @@ use super::constraints::{
     PseudoNormalParams, Sample, ValueConstraint, VariationalError, check_affine_rank,
     expand_pseudo_normals, validate_samples,
 };
-use super::dense::{SymmetricSolver, lower_from_fn};
 use super::kernel::{RadialKernel, RbfExpansion};
 use super::{BallSign, Frame, ImplicitField};
+use crate::linalg::dense::{SymmetricSolver, lower_from_fn};
 
 /// How the normals of the samples are used.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -459,9 +459,9 @@ fn solve_hermite<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::polygonize::marching_squares::{Grid2, MarchingParams, Polyline, contour};
     use crate::variational::constraints::{Offset, Sides};
     use crate::variational::datasets;
-    use crate::variational::marching_squares::{Grid2, MarchingParams, Polyline, contour};
 
     fn loops(fit: &TurkObrienFit<2>, n: usize) -> Vec<Polyline> {
         let g = Grid2 {
@@ -625,10 +625,11 @@ mod tests {
         ));
     }
 
-    /// Mann §2.3: normalising the coordinates changes the condition number, not the curve. Our
-    /// fit always normalises, so data scaled by 1000 gives the same field up to the scale.
+    /// Mann §2.3: the raw system's condition number depends on the scale of the coordinates, the
+    /// curve does not. Our fit always normalises, so data scaled by 1000 give the same system
+    /// (condition number) and the same field up to the scale.
     #[test]
-    fn scale_invariance() {
+    fn scaled_data_give_the_same_system_and_curve() {
         let s = datasets::shen27();
         let big: Vec<Sample<2>> = s
             .iter()

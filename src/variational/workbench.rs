@@ -12,12 +12,12 @@ use super::ImplicitField;
 use super::constraints::{
     Offset, PseudoNormalParams, Sample, Sides, ValueConstraint, VariationalError,
 };
-use super::marching_squares::{Grid2, Polyline};
 use super::mlp::{MlpParams, Smoothing, TrainingInfo, fit_mlp, pseudo_points};
 use super::mls::{MlsBasis, MlsNormals, MlsParams, WeightPower, fit_mls};
 use super::quality::{CurveQuality, analyse, curvatures};
 use super::svg::{SvgInput, render};
 use super::turk_obrien::{FitInfo, NormalMode, TurkObrienParams, fit_turk_obrien};
+use crate::polygonize::marching_squares::{Grid2, Polyline};
 
 /// The fitting method (also the `rbfsurf curve --method` values).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]

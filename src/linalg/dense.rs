@@ -1,4 +1,4 @@
-//! Dense symmetric indefinite solve of the variational systems (faer Bunch–Kaufman `LBLᵀ`) and a
+//! Dense symmetric indefinite solve (of the variational systems) (faer Bunch–Kaufman `LBLᵀ`) and a
 //! reciprocal condition estimate.
 //!
 //! The saddle-point matrix `[Φ P; Pᵀ 0]` is symmetric but indefinite, so Cholesky does not apply;
@@ -9,7 +9,7 @@ use faer::Mat;
 use faer::Side;
 use faer::linalg::solvers::{Lblt, Solve};
 
-use super::constraints::VariationalError;
+use super::LinalgError;
 
 /// A factored symmetric system with its diagnostics.
 #[derive(Clone)]
@@ -23,7 +23,7 @@ pub struct SymmetricSolver {
 impl SymmetricSolver {
     /// Factor `a` (only its lower triangle is read). Errors when the factor is not finite or the
     /// condition estimate is below `1e-15`.
-    pub fn new(a: &Mat<f64>) -> Result<Self, VariationalError> {
+    pub fn new(a: &Mat<f64>) -> Result<Self, LinalgError> {
         let n = a.nrows();
         let factor = a.lblt(Side::Lower);
         let mut s = SymmetricSolver {
@@ -39,7 +39,7 @@ impl SymmetricSolver {
             0.0
         };
         if s.rcond.is_nan() || s.rcond < 1e-15 {
-            return Err(VariationalError::SingularSystem { n, rcond: s.rcond });
+            return Err(LinalgError::SingularDense { n, rcond: s.rcond });
         }
         Ok(s)
     }
@@ -152,7 +152,7 @@ mod tests {
         let a = Mat::<f64>::from_fn(3, 3, |i, j| (i + 1) as f64 * (j + 1) as f64);
         assert!(matches!(
             SymmetricSolver::new(&a),
-            Err(VariationalError::SingularSystem { n: 3, .. })
+            Err(LinalgError::SingularDense { n: 3, .. })
         ));
     }
 }

@@ -135,7 +135,7 @@ pub fn sample_grid_blocked(
 /// Contour the zero set of `field` over `grid`.
 ///
 /// ```
-/// use rbfsurf::variational::marching_squares::{contour, Grid2, MarchingParams};
+/// use rbfsurf::polygonize::marching_squares::{contour, Grid2, MarchingParams};
 /// let g = Grid2 { min: [-2.0, -2.0], max: [2.0, 2.0], nx: 40, ny: 40 };
 /// let c = contour(&|p: &[f64; 2]| p[0].hypot(p[1]) - 1.0, &g, &MarchingParams::default());
 /// assert_eq!(c.len(), 1);
