@@ -1,4 +1,4 @@
-//! Vertices that round to one f32 position. Writers that store f32 coordinates (GLB) would give two
+//! Vertices that round to one f32 position. Writers that store f32 coordinates (GLB, PLY) would give two
 //! distinct f64 vertices the same position, and a triangle with two such corners zero area (seen on
 //! a 10⁶-point torus: 4 zero-area triangles once the GLB was read back and welded). Before writing,
 //! such vertices are merged into the first of them (an edge collapse at rounding level) and the
@@ -106,7 +106,9 @@ mod tests {
         assert_eq!(t.degenerate_triangles, 0);
         assert!(t.watertight && t.manifold && t.oriented, "{t:?}");
         assert_eq!(merged.triangles.len(), 6);
-        // Written as GLB and read back, then welded by position: still no degenerate triangle.
+        // Written as GLB (positions relative to a node translation, as the mesh is far from the
+        // origin) and read back, then welded by position: still no degenerate triangle, and the
+        // positions are back within f32 rounding of the relative coordinates.
         let back = crate::io::decode_glb(&crate::io::encode_glb(&mesh).unwrap()).unwrap();
         let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
         let weld: Vec<u32> = back
@@ -128,6 +130,16 @@ mod tests {
         };
         assert_eq!(analyze(&welded).degenerate_triangles, 0);
         assert_eq!(back.triangles.len(), 6);
+        assert!(
+            (back.vertices[1][0] - (b + 1.0)).abs() < 1e-6,
+            "{:?}",
+            back.vertices[1]
+        );
+        // The PLY writer (f32 too) merges the same way.
+        let ply = crate::io::write::encode_ply(&mesh).unwrap();
+        let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
+        let header = String::from_utf8_lossy(&ply[..text_end]);
+        assert!(header.contains("element vertex 5") && header.contains("element face 6"));
         // Nothing to merge: borrowed as is.
         let far = TriMesh {
             vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],

@@ -6,9 +6,14 @@
 //! closed object with holes from occlusion, e.g. under its base) give a closed surface, the holes
 //! closed by the carrier; a single-view range scan or an open scene give an open surface on the
 //! data. It is decided on a coarse polygonization (a quarter of the resolution, ~1/16 of the
-//! triangles): when more than [`AUTO_TRIM_FRACTION`] of its area is farther than the support radius
-//! from every point, the carrier continues the data far beyond them (an open scan) and the surface
-//! is trimmed; a closed object's unsupported patches are a tiny part (bunny 10k: 0.03%).
+//! triangles) without its floaters: when more than [`AUTO_TRIM_FRACTION`] of its area is farther
+//! than the support radius from every point, the carrier continues the data's own sheet far beyond
+//! them (an open scan) and the surface is trimmed; a closed object's unsupported patches are a tiny
+//! part (bunny 10k: 0.03%), and the carrier's blobs away from the data are floaters, not counted.
+//! A coarse surface that is not closed inside the domain (a sheet of the carrier attached to the
+//! object runs out to the box, as on thin limbs) counts as open too: trimming removes that sheet,
+//! closing would keep it; so does a final surface that is not closed inside the domain (a sheet too
+//! thin for the coarse pass): it is trimmed like an open scan.
 //!
 //! Open surfaces are polygonized only in the band the data support ([`DataBand`]: cells whose centre
 //! is within the support radius plus half a cell diagonal of a point), then the triangles whose
@@ -80,7 +85,7 @@ pub(crate) fn extract_surface(
         Boundary::Trim => true,
         Boundary::Auto if fit.carrier != Some(CarrierKind::Local) => false,
         Boundary::Auto => {
-            let share = unsupported_share(fit, domain, resolution, progress)?;
+            let share = unsupported_share(fit, params, domain, resolution, progress)?;
             s.unsupported_share = Some(share);
             share > AUTO_TRIM_FRACTION
         }
@@ -98,8 +103,14 @@ pub(crate) fn extract_surface(
     };
     let (mut mesh, stats) = polygonize_in(fit.field.as_ref(), domain, &pp, region, progress)?;
     s.polygonize = stats;
-    s.open = open;
     s.triangles_polygonized = mesh.triangles.len();
+    // Auto decided closed, but the surface leaves the domain (a thin sheet of the carrier the coarse
+    // pass missed): trim it like an open scan rather than keep a sheet out to the box.
+    let open = open
+        || (params.boundary == Boundary::Auto
+            && fit.carrier == Some(CarrierKind::Local)
+            && crate::mesh::analyze(&mesh).boundary_edges > 0);
+    s.open = open;
     if open {
         let mut drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
         trim::keep_enclosed_holes(&mesh, &mut drop);
@@ -116,20 +127,33 @@ pub(crate) fn extract_surface(
 }
 
 /// Share of the surface area farther than the support radius from every data point, measured on
-/// a coarse polygonization of the whole domain (normalised units).
+/// a coarse polygonization of the whole domain (normalised units) without its floaters (pieces of
+/// the carrier away from the data, which the final surface drops anyway): what is left unsupported
+/// is the carrier continuing the data's own sheet, i.e. an open scan. 1 when that surface is not
+/// closed inside the domain (a sheet of the carrier runs out to the box: only trimming removes it).
 fn unsupported_share(
     fit: &FittedField,
+    params: &ReconParams,
     domain: &Aabb,
     resolution: usize,
     progress: &dyn Progress,
 ) -> Result<f64, ReconError> {
+    let cells = (resolution / COARSE_DIVISOR).max(COARSE_MIN);
     let pp = PolygonizeParams {
-        resolution: (resolution / COARSE_DIVISOR).max(COARSE_MIN),
+        resolution: cells,
         refine_steps: 0,
         ..Default::default()
     };
     let quiet = CancelOnly(progress);
     let (mut mesh, _) = polygonize_in(fit.field.as_ref(), domain, &pp, &Everywhere, &quiet)?;
+    let longest = domain.extent().iter().fold(0.0f64, |a, &x| a.max(x));
+    let reach = fit.support_radius + 3f64.sqrt() * longest / cells as f64;
+    let (drop, _) = floaters::floaters(&mesh, &fit.points, reach, params.min_support);
+    trim::remove_triangles(&mut mesh, &drop);
+    if crate::mesh::analyze(&mesh).boundary_edges > 0 {
+        // The carrier's surface leaves the domain: closing it would keep a sheet out to the box.
+        return Ok(1.0);
+    }
     let total = area(&mesh);
     let drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
     trim::remove_triangles(&mut mesh, &drop);
