@@ -160,6 +160,11 @@ pub struct ReconParams {
     /// Drop connected components with fewer triangles than this fraction of the largest one
     /// (default 0 = keep every component; 0.01 removes floaters left by noise and outliers).
     pub min_component: f64,
+    /// Drop floaters: connected components carried by fewer than this fraction of the data points
+    /// (each point counts for the component of its nearest mesh vertex within the support radius).
+    /// Default 0.01; 0 keeps every component. Two separate objects each carry their own points and
+    /// both stay.
+    pub min_support: f64,
 }
 
 impl Default for ReconParams {
@@ -183,6 +188,7 @@ impl Default for ReconParams {
             levels: 1,
             blocks: crate::rbf::Blocks::Auto,
             min_component: 0.0,
+            min_support: 0.01,
         }
     }
 }
@@ -283,6 +289,13 @@ impl ReconParams {
                 "a fraction of the largest component in [0, 1]",
             );
         }
+        if !(self.min_support.is_finite() && (0.0..=0.5).contains(&self.min_support)) {
+            return err(
+                "min-support",
+                self.min_support.to_string(),
+                "a fraction of the data points in [0, 0.5]",
+            );
+        }
         if !(1..=8).contains(&self.levels) {
             return err("levels", self.levels.to_string(), "an integer in 1..=8");
         }
@@ -377,7 +390,7 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub outlier_std_ratio: Option<f64>,
-    /// Unsupported surface: auto (default: trim with the local carrier, closed otherwise), trim, closed.
+    /// Unsupported surface: auto (default: with the local carrier, open when more than 2% of a coarse pass's surface is farther than R from the data — a single-view scan or open scene — else closed, e.g. data all around an object with occlusion holes), trim (polygonize only the data band; manifold border), closed.
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
@@ -395,6 +408,10 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub min_component: Option<f64>,
+    /// Drop floaters: components carried by fewer than this fraction of the data points (default 0.01; 0 keeps all; two separate objects both stay).
+    #[cfg_attr(feature = "cli", arg(long))]
+    #[serde(default)]
+    pub min_support: Option<f64>,
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -432,6 +449,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             levels: a.levels.unwrap_or(d.levels),
             blocks: a.blocks.unwrap_or(d.blocks),
             min_component: a.min_component.unwrap_or(d.min_component),
+            min_support: a.min_support.unwrap_or(d.min_support),
         };
         p.validate()?;
         Ok(p)

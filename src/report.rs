@@ -211,8 +211,19 @@ pub struct PolygonizeReport {
     pub blocks_active: usize,
     /// Field evaluations.
     pub field_evaluations: u64,
+    /// Share of the surface area farther than the support radius from the data, measured on a
+    /// coarse pass to decide open or closed (`--boundary auto` with the local carrier; else null).
+    pub unsupported_share: Option<f64>,
+    /// Triangles the polygonizer produced (open surfaces: only in the band the data support).
+    pub triangles_polygonized: usize,
     /// Triangles dropped because no data point is within the support radius (open scans).
     pub trimmed_triangles: usize,
+    /// Triangles dropped to make the trimmed border manifold (bow-tie vertices).
+    pub border_triangles: usize,
+    /// Components dropped as floaters: carried by fewer than `--min-support` of the data points.
+    pub floaters_removed: usize,
+    /// Triangles in those components.
+    pub floater_triangles: usize,
     /// Connected components dropped by `--min-component` (floaters).
     pub small_components_removed: usize,
     /// Triangles in those components.

@@ -143,8 +143,10 @@ fn push_accessor(
 /// Encodes a mesh as GLB bytes (glTF 2.0 binary), then decodes the result and checks the vertex
 /// and index counts (an error, not a panic, if they differ).
 ///
-/// Coordinates are converted from f64 to f32; normals are written unit length when
-/// `mesh.normals` is non-empty. Fails with [`IoError::Encode`] on an empty mesh, out-of-range
+/// Coordinates are converted from f64 to f32; vertices that round to the same f32 position are merged
+/// first and the triangles that then repeat a corner dropped (so no zero-area triangle appears when
+/// the file is read back and welded); normals are written unit length when `mesh.normals` is
+/// non-empty. Fails with [`IoError::Encode`] on an empty mesh, out-of-range
 /// indices or coordinates that are not finite in f32.
 ///
 /// ```
@@ -156,6 +158,11 @@ fn push_accessor(
 /// assert_eq!(rbfsurf::io::decode_glb(&glb).unwrap().triangles, mesh.triangles);
 /// ```
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    check_mesh(mesh, "GLB")?;
+    let origin = origin_for(mesh);
+    let shifted = shift(mesh, origin);
+    let merged = super::snap::merge_f32_duplicates(&shifted);
+    let mesh: &TriMesh = &merged;
     check_mesh(mesh, "GLB")?;
     let (pos, bounds) = f32_positions(mesh)?;
     let normals = unit_normals(mesh);
@@ -170,6 +177,7 @@ pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
         normals: !normals.is_empty(),
         bin_len: bin.len(),
         bounds,
+        origin,
     };
     let out = container(&document(&layout), bin)?;
     let back = decode_glb(&out).map_err(|e| enc_err(format!("read-back failed: {e}")))?;
@@ -213,6 +221,34 @@ struct Layout {
     normals: bool,
     bin_len: usize,
     bounds: Bounds,
+    /// Node translation (the positions are stored relative to it), `None` at the origin.
+    origin: Option<[f32; 3]>,
+}
+
+/// Where to store positions from: for a mesh far from the origin (bbox centre farther than its
+/// extent), its bbox centre rounded to f32 (exactly representable, so `origin + p` loses nothing
+/// but the f32 rounding of the small relative `p`: at x ≈ 6·10⁵ absolute f32 coordinates are
+/// 0.06 apart); `None` otherwise (positions stored as they are).
+fn origin_for(mesh: &TriMesh) -> Option<[f32; 3]> {
+    let b = crate::geometry::Aabb::from_points(&mesh.vertices);
+    let (c, e) = (b.center(), b.extent());
+    let far = (0..3).any(|k| c[k].abs() > e.iter().fold(0.0f64, |a, &x| a.max(x)));
+    let o = c.map(|x| x as f32);
+    (far && o.iter().all(|x| x.is_finite())).then_some(o)
+}
+
+/// `mesh` with `origin` subtracted from every vertex (borrowed when `None`).
+fn shift(mesh: &TriMesh, origin: Option<[f32; 3]>) -> Cow<'_, TriMesh> {
+    match origin {
+        None => Cow::Borrowed(mesh),
+        Some(o) => Cow::Owned(TriMesh {
+            vertices: (mesh.vertices.iter())
+                .map(|p| [0, 1, 2].map(|k| p[k] - f64::from(o[k])))
+                .collect(),
+            normals: mesh.normals.clone(),
+            triangles: mesh.triangles.clone(),
+        }),
+    }
 }
 
 /// The glTF JSON document: one buffer, 2–3 views and accessors, one mesh, node and scene.
@@ -265,6 +301,7 @@ fn document(l: &Layout) -> json::Root {
     });
     let node = root.push(json::Node {
         mesh: Some(m),
+        translation: l.origin,
         ..Default::default()
     });
     let scene = root.push(json::Scene {
@@ -295,7 +332,8 @@ fn container(root: &json::Root, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
 }
 
 /// Decodes GLB bytes into one triangle mesh (all triangle primitives of all meshes, concatenated;
-/// node transforms ignored). Normals are kept only when every primitive has them.
+/// a mesh is moved by the translation of the first node that uses it, other node transforms are
+/// ignored). Normals are kept only when every primitive has them.
 pub fn decode_glb(bytes: &[u8]) -> Result<TriMesh, IoError> {
     decode_glb_named(bytes, Path::new(MEMORY_SOURCE))
 }
@@ -311,6 +349,9 @@ pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoEr
     let mut out = TriMesh::default();
     let mut all_normals = true;
     for mesh in gltf.document.meshes() {
+        let t = (gltf.document.nodes())
+            .find(|n| n.mesh().is_some_and(|m| m.index() == mesh.index()))
+            .map_or([0.0; 3], |n| n.transform().decomposed().0);
         for prim in mesh.primitives() {
             if prim.mode() != gltf::mesh::Mode::Triangles {
                 continue;
@@ -321,7 +362,10 @@ pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoEr
             let base = out.vertices.len();
             let pos = read_vec3(&acc, blob, src)?;
             let count = pos.len();
-            out.vertices.extend(pos);
+            out.vertices.extend(
+                pos.into_iter()
+                    .map(|p| [0, 1, 2].map(|k| p[k] + f64::from(t[k]))),
+            );
             match prim.get(&gltf::Semantic::Normals) {
                 Some(nacc) if all_normals => {
                     let ns = read_vec3(&nacc, blob, src)?;

@@ -17,6 +17,7 @@ mod glb;
 mod obj;
 mod off;
 mod ply;
+mod snap;
 mod text;
 mod write;
 

@@ -50,7 +50,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 
 /// Writes `mesh` to `path` in `format` (see [`MeshFormat`]), atomically via [`write_atomic`].
 ///
-/// GLB: see [`encode_glb`]. PLY: binary little-endian, `float x y z [nx ny nz]`,
+/// GLB: see [`encode_glb`]. PLY: binary little-endian, `float x y z [nx ny nz]` (vertices that round
+/// to one f32 position merged, as for GLB),
 /// `list uchar int vertex_indices`. OBJ: `v`, `vn`, `f a//a b//b c//c` (1-based), full f64 precision.
 ///
 /// ```
@@ -97,8 +98,13 @@ pub fn write_points_ply(path: &Path, cloud: &crate::geometry::PointCloud) -> Res
     write_atomic(path, &bytes)
 }
 
-/// Binary little-endian PLY bytes of `mesh` (f32 coordinates, unit f32 normals when present).
+/// Binary little-endian PLY bytes of `mesh` (f32 coordinates, unit f32 normals when present;
+/// vertices that round to one f32 position merged, see [`super::snap`]).
 pub(crate) fn encode_ply(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    check_mesh(mesh, "PLY")?;
+    // f32 coordinates: vertices that round to one position are merged first (as for GLB).
+    let merged = super::snap::merge_f32_duplicates(mesh);
+    let mesh: &TriMesh = &merged;
     check_mesh(mesh, "PLY")?;
     let normals = unit_normals(mesh);
     let mut head =

@@ -4,9 +4,13 @@
 //! - [`topology`]: components, watertightness, manifoldness, orientation, Euler characteristic and genus.
 //! - [`optimize`]: vertex-cache and vertex-fetch reordering with meshoptimizer.
 //! - [`compare`]: Chamfer / Hausdorff distances to a reference mesh or point set.
+//! - [`trim`], [`border`], [`floaters`]: open-scan trimming, manifold borders, floater removal by
+//!   data support.
 
+pub mod border;
 pub mod compare;
 mod distance;
+pub mod floaters;
 pub mod optimize;
 #[cfg(test)]
 pub(crate) mod test_meshes;

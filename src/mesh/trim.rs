@@ -23,6 +23,65 @@ pub fn unsupported_triangles(mesh: &TriMesh, points: &[Point3], max_distance: f6
         .collect()
 }
 
+/// Un-flags the pinholes of a trim: every edge-connected region of flagged triangles that shares an
+/// edge with a kept triangle but has no border edge of `mesh` (an edge used by one triangle) is a
+/// hole enclosed by supported surface, not a border, and is kept. Used on a mesh polygonized only in
+/// the data band: a data gap wider than the band is a hole of the band itself and stays open, while
+/// a gap just wider than the trim radius would otherwise leave a one- or two-triangle hole. Returns
+/// how many triangles were un-flagged. `O(t log t)`.
+pub fn keep_enclosed_holes(mesh: &TriMesh, drop: &mut [bool]) -> usize {
+    let t = mesh.triangles.len();
+    let mut half: Vec<(u64, u32)> = Vec::with_capacity(3 * t);
+    for (ti, tri) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            half.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), ti as u32));
+        }
+    }
+    half.sort_unstable();
+    let mut uf = super::topology::UnionFind::new(t);
+    // Per region root (after all unions): touches a border / touches a kept triangle.
+    let mut pairs: Vec<(u32, u32)> = Vec::new();
+    let mut border: Vec<u32> = Vec::new();
+    let mut i = 0;
+    while i < half.len() {
+        let mut j = i + 1;
+        while j < half.len() && half[j].0 == half[i].0 {
+            j += 1;
+        }
+        match &half[i..j] {
+            [(_, a)] => border.push(*a),
+            [(_, a), (_, b)] => match (drop[*a as usize], drop[*b as usize]) {
+                (true, true) => uf.union(*a, *b),
+                (true, false) => pairs.push((*a, *b)),
+                (false, true) => pairs.push((*b, *a)),
+                (false, false) => {}
+            },
+            many => border.extend(many.iter().map(|h| h.1)),
+        }
+        i = j;
+    }
+    let mut open = vec![false; t];
+    let mut beside_kept = vec![false; t];
+    for a in border.into_iter().filter(|&a| drop[a as usize]) {
+        let r = uf.find(a);
+        open[r as usize] = true;
+    }
+    for (a, _) in pairs {
+        let r = uf.find(a);
+        beside_kept[r as usize] = true;
+    }
+    let mut restored = 0;
+    for ti in 0..t as u32 {
+        let r = uf.find(ti) as usize;
+        if drop[ti as usize] && beside_kept[r] && !open[r] {
+            drop[ti as usize] = false;
+            restored += 1;
+        }
+    }
+    restored
+}
+
 /// Remove the triangles flagged in `drop`; returns how many. Unused vertices are left for the GPU
 /// reordering to drop.
 pub fn remove_triangles(mesh: &mut TriMesh, drop: &[bool]) -> usize {
@@ -80,6 +139,41 @@ mod tests {
         let (flag, n) = small_components(&mesh, 0.0);
         assert_eq!(n, 0);
         assert!(flag.iter().all(|f| !f));
+    }
+
+    #[test]
+    fn enclosed_pinholes_are_kept_and_border_regions_dropped() {
+        // A closed torus with one flagged triangle: a hole enclosed by kept surface, un-flagged.
+        let torus = crate::mesh::test_meshes::torus(1.0, 0.3, 12, 8);
+        let mut drop = vec![false; torus.triangles.len()];
+        drop[7] = true;
+        assert_eq!(keep_enclosed_holes(&torus, &mut drop), 1);
+        assert!(drop.iter().all(|d| !*d));
+        // Every triangle flagged: no kept neighbour (a whole unsupported piece), stays dropped.
+        let mut all = vec![true; torus.triangles.len()];
+        assert_eq!(keep_enclosed_holes(&torus, &mut all), 0);
+        assert!(all.iter().all(|d| *d));
+        // An open strip of 3 unit squares along x: the flagged last square reaches the strip's
+        // border, so it is a border region and stays dropped.
+        let mut vertices = Vec::new();
+        for i in 0..=3 {
+            vertices.push([i as f64, 0.0, 0.0]);
+            vertices.push([i as f64, 1.0, 0.0]);
+        }
+        let mut triangles = Vec::new();
+        for i in 0..3u32 {
+            let (a, b, c, d) = (2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+        let strip = TriMesh {
+            vertices,
+            normals: vec![],
+            triangles,
+        };
+        let mut drop = vec![false, false, false, false, true, true];
+        assert_eq!(keep_enclosed_holes(&strip, &mut drop), 0);
+        assert_eq!(drop, vec![false, false, false, false, true, true]);
     }
 
     #[test]

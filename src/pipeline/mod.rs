@@ -5,9 +5,9 @@ use crate::clean::{CleanStats, clean_cloud};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Normalization, Point3, PointCloud, TriMesh};
 use crate::params::{Boundary, Method, ReconParams};
-use crate::polygonize::{PolygonizeParams, ScalarField, polygonize};
+use crate::polygonize::ScalarField;
 use crate::progress::Progress;
-use crate::rbf::{CarrierKind, SupportEstimate};
+use crate::rbf::SupportEstimate;
 use crate::report::{
     MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib,
 };
@@ -18,6 +18,7 @@ mod blocks;
 mod csrbf;
 mod global;
 pub mod run;
+mod surface;
 
 pub use csrbf::fit_field;
 pub use run::{PointSource, RunError, RunOutput, RunSummary, run};
@@ -126,15 +127,8 @@ fn reconstruct_inner(
     let (domain, grid_resolution) = polygonize_domain(&fit, resolution, params.boundary);
     progress.stage(crate::progress::Stage::Polygonize);
     let t = Instant::now();
-    let pp = PolygonizeParams {
-        resolution: grid_resolution,
-        ..Default::default()
-    };
-    let (mut mesh, stats) = polygonize(fit.field.as_ref(), &domain, &pp, progress)?;
-    let (trim, trimmed_triangles) = trim_unsupported(&mut mesh, &fit, params.boundary);
-    let (flagged, small_components_removed) =
-        crate::mesh::trim::small_components(&mesh, params.min_component);
-    let small_component_triangles = crate::mesh::trim::remove_triangles(&mut mesh, &flagged);
+    let (mut mesh, surface) =
+        surface::extract_surface(&fit, params, &domain, grid_resolution, progress)?;
     timings.polygonize = t.elapsed().as_secs_f64();
     progress.stage(crate::progress::Stage::Post);
     let t = Instant::now();
@@ -147,7 +141,7 @@ fn reconstruct_inner(
     timings.total = start.elapsed().as_secs_f64();
     let report = Report {
         input: fit.clean,
-        params: params_report(params, &fit, resolution, trim),
+        params: params_report(params, &fit, resolution, surface.open),
         matrix: fit.matrix.clone(),
         residual: fit.residual,
         mesh: topology,
@@ -156,39 +150,23 @@ fn reconstruct_inner(
             peak_rss_mib: peak_rss_mib(),
         },
         polygonize: PolygonizeReport {
-            cells_total: stats.cells_total,
-            blocks_total: stats.blocks_total,
-            blocks_active: stats.blocks_active,
-            field_evaluations: stats.field_evaluations,
-            trimmed_triangles,
-            small_components_removed,
-            small_component_triangles,
+            cells_total: surface.polygonize.cells_total,
+            blocks_total: surface.polygonize.blocks_total,
+            blocks_active: surface.polygonize.blocks_active,
+            field_evaluations: surface.polygonize.field_evaluations,
+            unsupported_share: surface.unsupported_share,
+            triangles_polygonized: surface.triangles_polygonized,
+            trimmed_triangles: surface.trimmed_triangles,
+            border_triangles: surface.border_triangles,
+            floaters_removed: surface.floaters_removed,
+            floater_triangles: surface.floater_triangles,
+            small_components_removed: surface.small_components_removed,
+            small_component_triangles: surface.small_component_triangles,
             cell_size: domain.extent().iter().fold(0.0f64, |a, &b| a.max(b))
                 / grid_resolution as f64,
         },
     };
     Ok(Reconstruction { mesh, report })
-}
-
-/// Share of unsupported triangles above which `--boundary auto` trims: an open scan's extrapolated
-/// sheet is a large part of the mesh; a closed scan's sparse patches are a tiny one (bunny 10k: 0.03%).
-const AUTO_TRIM_FRACTION: f64 = 0.02;
-
-/// Apply the boundary policy (normalised units): drop triangles farther than the support radius from
-/// the data when asked (`trim`), or automatically with the local carrier when they are more than
-/// [`AUTO_TRIM_FRACTION`] of the mesh. Returns (trimmed?, triangles removed).
-fn trim_unsupported(mesh: &mut TriMesh, fit: &FittedField, boundary: Boundary) -> (bool, usize) {
-    if boundary == Boundary::Closed
-        || (boundary == Boundary::Auto && fit.carrier != Some(CarrierKind::Local))
-    {
-        return (false, 0);
-    }
-    let drop = crate::mesh::trim::unsupported_triangles(mesh, &fit.points, fit.support_radius);
-    let share = drop.iter().filter(|d| **d).count() as f64 / drop.len().max(1) as f64;
-    if boundary == Boundary::Auto && share <= AUTO_TRIM_FRACTION {
-        return (false, 0);
-    }
-    (true, crate::mesh::trim::remove_triangles(mesh, &drop))
 }
 
 /// Grid resolution from the median point spacing (normalised units): about one cell per spacing,

@@ -6,9 +6,9 @@
 //! Vertices are keyed by global edge id and computed from the edge's canonical end points, so the same
 //! edge gives bit-identical vertices in every block that touches it.
 
-use super::ScalarField;
 use super::grid::Grid;
 use super::kuhn::{CubeEdge, TETS, TetCase};
+use super::{Region, ScalarField};
 use crate::geometry::{Aabb, Point3, add, normalized, scale, sub};
 
 /// The triangles and vertices of one block, with block-local vertex indices.
@@ -35,6 +35,7 @@ fn inside(f: f64) -> bool {
 /// Working state of one block.
 struct Block<'a> {
     field: &'a dyn ScalarField,
+    region: &'a dyn Region,
     grid: &'a Grid,
     lo: [usize; 3],
     /// Corners per axis (`cells + 1`).
@@ -52,6 +53,10 @@ const TILE: usize = 4;
 /// Field values at the `dims` corners starting at grid corner `lo`, x fastest, plus the number of
 /// field evaluations spent.
 ///
+/// A tile outside `keep` is not sampled either: its corners get `+∞` (outside). None of its cells
+/// is triangulated (the region is monotone, so no cell of the tile touches it), so these values are
+/// never used for geometry.
+///
 /// The block is cut into tiles of `TILE³` cells. A tile the field rules out
 /// (`may_contain_zero(tile) == false`, so `f` has one sign on the closed tile) is not sampled: its
 /// corners get the value at the tile's centre, which has that sign. Only edges with a sign change are
@@ -59,6 +64,7 @@ const TILE: usize = 4;
 /// for geometry. Corners of the other tiles are evaluated with [`ScalarField::values_in`], once each.
 fn sample_corners(
     field: &dyn ScalarField,
+    keep: &dyn Region,
     grid: &Grid,
     lo: [usize; 3],
     dims: [usize; 3],
@@ -81,8 +87,12 @@ fn sample_corners(
             min: grid.corner([lo[0] + c0[0], lo[1] + c0[1], lo[2] + c0[2]]),
             max: grid.corner([lo[0] + c1[0], lo[1] + c1[1], lo[2] + c1[2]]),
         };
+        if !keep.touches(&region) {
+            skipped.push((c0, c1, None));
+            continue;
+        }
         if !field.may_contain_zero(&region) {
-            skipped.push((c0, c1, region.center()));
+            skipped.push((c0, c1, Some(region.center())));
             continue;
         }
         pts.clear();
@@ -106,13 +116,15 @@ fn sample_corners(
         }
     }
     for (c0, c1, centre) in skipped {
-        let v = field.value(&centre);
-        let v = if v.is_nan() || v == 0.0 {
-            f64::INFINITY
-        } else {
-            v
-        };
-        evaluations += 1;
+        let v = centre.map_or(f64::INFINITY, |c| {
+            evaluations += 1;
+            let v = field.value(&c);
+            if v.is_nan() || v == 0.0 {
+                f64::INFINITY
+            } else {
+                v
+            }
+        });
         for k in c0[2]..=c1[2] {
             for j in c0[1]..=c1[1] {
                 for i in c0[0]..=c1[0] {
@@ -129,6 +141,7 @@ fn sample_corners(
 /// Extracts the zero set inside block `b` of `grid`.
 pub(crate) fn extract_block(
     field: &dyn ScalarField,
+    region: &dyn Region,
     grid: &Grid,
     table: &[[TetCase; 16]; 6],
     b: usize,
@@ -136,7 +149,7 @@ pub(crate) fn extract_block(
 ) -> BlockMesh {
     let (lo, hi) = grid.block_cells(b);
     let dims = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-    let (values, evaluations) = sample_corners(field, grid, lo, dims);
+    let (values, evaluations) = sample_corners(field, region, grid, lo, dims);
     let first = values.first().is_some_and(|&f| inside(f));
     if values.iter().all(|&f| inside(f) == first) {
         return BlockMesh {
@@ -146,6 +159,7 @@ pub(crate) fn extract_block(
     }
     let mut block = Block {
         field,
+        region,
         grid,
         lo,
         dims,
@@ -189,6 +203,17 @@ impl Block<'_> {
             }
         }
         if cube_mask == 0 || cube_mask == 0xFF {
+            return;
+        }
+        let global = |bits: u8| {
+            let c = Self::offset(cell, bits);
+            self.grid.corner([0, 1, 2].map(|k| self.lo[k] + c[k]))
+        };
+        let cell_box = Aabb {
+            min: global(0),
+            max: global(7),
+        };
+        if !self.region.touches(&cell_box) {
             return;
         }
         for (t, tet) in TETS.iter().enumerate() {

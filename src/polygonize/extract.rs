@@ -8,6 +8,11 @@
 //! edge- and vertex-manifold and consistently oriented wherever the zero set is closed inside the domain.
 //! Vertices are welded across cells and blocks by global grid-edge id.
 //!
+//! [`polygonize_in`] restricts the extraction to a [`Region`] (e.g. the band the data support on an
+//! open scan): blocks and tiles outside it are neither sampled nor triangulated, and a cell is
+//! triangulated only when its box touches the region. Inside the region the mesh is exactly the one
+//! [`polygonize`] gives (same grid, same vertices); it ends, open, at cell faces on the region's border.
+//!
 //! Cost: one field evaluation per corner of each active block plus `refine_steps + 1` per vertex
 //! (value and gradient), `O(active cells)` work and memory.
 
@@ -17,11 +22,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use super::ScalarField;
 use super::block::{BlockMesh, extract_block};
 use super::grid::Grid;
 use super::kuhn::case_table;
 use super::params::{PolygonizeError, PolygonizeParams, PolygonizeStats};
+use super::{Everywhere, Region, ScalarField};
 use crate::geometry::{Aabb, TriMesh};
 use crate::progress::Progress;
 
@@ -62,12 +67,31 @@ pub fn polygonize(
     params: &PolygonizeParams,
     progress: &dyn Progress,
 ) -> Result<(TriMesh, PolygonizeStats), PolygonizeError> {
+    polygonize_in(field, domain, params, &Everywhere, progress)
+}
+
+/// [`polygonize`] restricted to the cells whose box touches `region` (see [`Region`]): the same
+/// vertices and triangles in those cells, nothing elsewhere, and nothing sampled in blocks or tiles
+/// outside the region. Deterministic (the region is asked about boxes only).
+///
+/// # Errors
+/// As [`polygonize`].
+pub fn polygonize_in(
+    field: &dyn ScalarField,
+    domain: &Aabb,
+    params: &PolygonizeParams,
+    region: &dyn Region,
+    progress: &dyn Progress,
+) -> Result<(TriMesh, PolygonizeStats), PolygonizeError> {
     let grid = Grid::new(domain, params)?;
     let table = case_table();
     let blocks_total = grid.block_count();
     let active: Vec<usize> = (0..blocks_total)
         .into_par_iter()
-        .filter(|&b| !progress.cancelled() && field.may_contain_zero(&grid.block_box(b)))
+        .filter(|&b| {
+            let bbox = grid.block_box(b);
+            !progress.cancelled() && region.touches(&bbox) && field.may_contain_zero(&bbox)
+        })
         .collect();
     if progress.cancelled() {
         return Err(PolygonizeError::Cancelled);
@@ -81,7 +105,7 @@ pub fn polygonize(
             if progress.cancelled() {
                 return Err(PolygonizeError::Cancelled);
             }
-            let mesh = extract_block(field, &grid, &table, b, params.refine_steps);
+            let mesh = extract_block(field, region, &grid, &table, b, params.refine_steps);
             let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
             if finished.is_multiple_of(report_every) {
                 let share = finished as f64 / active.len() as f64;
@@ -433,6 +457,74 @@ mod tests {
         assert_eq!(
             (topo.components, topo.boundary_loops, topo.euler),
             (1, 6, -4)
+        );
+    }
+
+    /// Keeps the boxes that reach below `z = 0` (monotone).
+    struct Below;
+    impl Region for Below {
+        fn touches(&self, cell: &Aabb) -> bool {
+            cell.min[2] < 0.0
+        }
+    }
+
+    #[test]
+    fn a_region_keeps_exactly_the_full_mesh_in_its_cells() {
+        let shape = Shape::Sphere {
+            c: [0.01, -0.02, 0.03],
+            r: 0.6,
+        };
+        let params = PolygonizeParams {
+            resolution: 32,
+            ..Default::default()
+        };
+        let field = Field { shape, band: true };
+        let (full, fs) = polygonize(&field, &cube(1.0), &params, &NoProgress).unwrap();
+        let (part, ps) = polygonize_in(&field, &cube(1.0), &params, &Below, &NoProgress).unwrap();
+        assert!(ps.blocks_active < fs.blocks_active, "{ps:?} {fs:?}");
+        assert!(ps.field_evaluations < fs.field_evaluations);
+        // Every kept triangle is a triangle of the full mesh (same positions), and the full mesh's
+        // triangles whose cells lie below z = 0 (all corners below the first grid plane ≥ 0) are kept.
+        let key = |m: &TriMesh, t: &[u32; 3]| {
+            let mut k = t.map(|v| m.vertices[v as usize].map(f64::to_bits));
+            k.sort();
+            k
+        };
+        let full_set: std::collections::HashSet<_> =
+            full.triangles.iter().map(|t| key(&full, t)).collect();
+        assert!(
+            part.triangles
+                .iter()
+                .all(|t| full_set.contains(&key(&part, t)))
+        );
+        let part_set: std::collections::HashSet<_> =
+            part.triangles.iter().map(|t| key(&part, t)).collect();
+        let h = 2.0 / 32.0;
+        for t in &full.triangles {
+            let top = t
+                .iter()
+                .map(|&v| full.vertices[v as usize][2])
+                .fold(-1.0, f64::max);
+            if top < -1e-12 {
+                assert!(part_set.contains(&key(&full, t)));
+            }
+            let bottom = t
+                .iter()
+                .map(|&v| full.vertices[v as usize][2])
+                .fold(1.0, f64::min);
+            if bottom > h + 1e-12 {
+                assert!(!part_set.contains(&key(&full, t)));
+            }
+        }
+        // A cap cut along a grid plane: one open, manifold, oriented disk.
+        let topo = analyze(&part);
+        assert!(
+            !topo.watertight && topo.manifold && topo.oriented,
+            "{topo:?}"
+        );
+        assert_eq!(
+            (topo.components, topo.boundary_loops, topo.euler),
+            (1, 1, 1)
         );
     }
 

@@ -26,6 +26,28 @@ pub trait ScalarField: Sync {
     fn may_contain_zero(&self, cell: &Aabb) -> bool;
 }
 
+/// Where the polygonizer may put triangles: a grid cell is triangulated only when its box
+/// [`Region::touches`] the region, and blocks and tiles that do not touch it are not sampled at all.
+/// Open scans use [`DataBand`] so that only the band the data support is polygonized.
+pub trait Region: Sync {
+    /// `false` only when no cell inside `cell` (a cell, tile or block box, normalised units) is kept.
+    /// Must be monotone: a box that answers `false` contains no box that answers `true`; the answer
+    /// for a cell must depend on its box only (so the mesh is the same whatever the block order).
+    fn touches(&self, cell: &Aabb) -> bool;
+}
+
+/// The whole domain: every cell is kept.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Everywhere;
+
+impl Region for Everywhere {
+    fn touches(&self, _cell: &Aabb) -> bool {
+        true
+    }
+}
+
+mod band;
+
 mod block;
 mod extract;
 mod grid;
@@ -33,5 +55,6 @@ mod kuhn;
 pub mod marching_squares;
 mod params;
 
-pub use extract::polygonize;
+pub use band::DataBand;
+pub use extract::{polygonize, polygonize_in};
 pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats};

@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 mod large;
+mod open_scans;
 mod parser_soak;
 mod pipeline;
 mod run;

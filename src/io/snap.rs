@@ -1,0 +1,151 @@
+//! Vertices that round to one f32 position. Writers that store f32 coordinates (GLB, PLY) would give two
+//! distinct f64 vertices the same position, and a triangle with two such corners zero area (seen on
+//! a 10⁶-point torus: 4 zero-area triangles once the GLB was read back and welded). Before writing,
+//! such vertices are merged into the first of them (an edge collapse at rounding level) and the
+//! triangles that lose a corner are dropped. `O(V + F)` expected (one hash map over the vertices).
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+
+use crate::geometry::TriMesh;
+
+/// `mesh` with every group of vertices whose coordinates are equal after rounding to f32 merged into
+/// the group's first vertex (position rounded to f32, that vertex's normal), triangles remapped and
+/// those with a repeated corner dropped, vertices renumbered in first-use order of the original
+/// indices. Borrowed unchanged when no two vertices round to the same position. Non-finite f32
+/// coordinates are left for the caller's checks (they are never merged).
+pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
+    let key = |p: &[f64; 3]| p.map(|c| (c as f32).to_bits());
+    let mut first: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.vertices.len());
+    let mut to: Vec<u32> = Vec::with_capacity(mesh.vertices.len());
+    let mut kept = 0u32;
+    for p in &mesh.vertices {
+        let finite = p.iter().all(|c| (*c as f32).is_finite());
+        let id = if finite {
+            *first.entry(key(p)).or_insert_with(|| {
+                kept += 1;
+                kept - 1
+            })
+        } else {
+            kept += 1;
+            kept - 1
+        };
+        to.push(id);
+    }
+    if kept as usize == mesh.vertices.len() {
+        return Cow::Borrowed(mesh);
+    }
+    let mut vertices = vec![[0.0; 3]; kept as usize];
+    let mut normals = vec![
+        [0.0; 3];
+        if mesh.normals.is_empty() {
+            0
+        } else {
+            kept as usize
+        }
+    ];
+    let mut seen = vec![false; kept as usize];
+    for (v, &id) in to.iter().enumerate() {
+        if !seen[id as usize] {
+            seen[id as usize] = true;
+            vertices[id as usize] = mesh.vertices[v].map(|c| f64::from(c as f32));
+            if let Some(n) = mesh.normals.get(v).filter(|_| !normals.is_empty()) {
+                normals[id as usize] = *n;
+            }
+        }
+    }
+    let triangles = mesh
+        .triangles
+        .iter()
+        .filter_map(|t| {
+            let m = t.map(|v| to.get(v as usize).copied().unwrap_or(v));
+            (m[0] != m[1] && m[1] != m[2] && m[0] != m[2]).then_some(m)
+        })
+        .collect();
+    Cow::Owned(TriMesh {
+        vertices,
+        normals,
+        triangles,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::analyze;
+
+    #[test]
+    fn vertices_one_f32_apart_are_merged_and_their_sliver_dropped() {
+        // A square pyramid's apex split into two vertices 1e-9 apart at coordinate ~1e3 (f32 spacing
+        // there is 6e-5), joined by a sliver triangle pair.
+        let b = 1000.0;
+        let mesh = TriMesh {
+            vertices: vec![
+                [b, b, b],
+                [b + 1.0, b, b],
+                [b + 1.0, b + 1.0, b],
+                [b, b + 1.0, b],
+                [b + 0.5, b + 0.5, b + 1.0],
+                [b + 0.5 + 1e-9, b + 0.5, b + 1.0],
+            ],
+            normals: vec![],
+            triangles: vec![
+                [0, 3, 2],
+                [0, 2, 1],
+                [0, 1, 4],
+                [1, 5, 4],
+                [1, 2, 5],
+                [2, 3, 5],
+                [3, 4, 5],
+                [3, 0, 4],
+            ],
+        };
+        let merged = merge_f32_duplicates(&mesh);
+        assert_eq!(merged.vertices.len(), 5);
+        let t = analyze(&merged);
+        assert_eq!(t.degenerate_triangles, 0);
+        assert!(t.watertight && t.manifold && t.oriented, "{t:?}");
+        assert_eq!(merged.triangles.len(), 6);
+        // Written as GLB (positions relative to a node translation, as the mesh is far from the
+        // origin) and read back, then welded by position: still no degenerate triangle, and the
+        // positions are back within f32 rounding of the relative coordinates.
+        let back = crate::io::decode_glb(&crate::io::encode_glb(&mesh).unwrap()).unwrap();
+        let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
+        let weld: Vec<u32> = back
+            .vertices
+            .iter()
+            .map(|p| {
+                let n = ids.len() as u32;
+                *ids.entry(p.map(f64::to_bits)).or_insert(n)
+            })
+            .collect();
+        let welded = TriMesh {
+            vertices: back.vertices.clone(),
+            normals: vec![],
+            triangles: back
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| weld[v as usize]))
+                .collect(),
+        };
+        assert_eq!(analyze(&welded).degenerate_triangles, 0);
+        assert_eq!(back.triangles.len(), 6);
+        assert!(
+            (back.vertices[1][0] - (b + 1.0)).abs() < 1e-6,
+            "{:?}",
+            back.vertices[1]
+        );
+        // The PLY writer (f32 too) merges the same way.
+        let ply = crate::io::write::encode_ply(&mesh).unwrap();
+        let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
+        let header = String::from_utf8_lossy(&ply[..text_end]);
+        assert!(header.contains("element vertex 5") && header.contains("element face 6"));
+        // Nothing to merge: borrowed as is.
+        let far = TriMesh {
+            vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            normals: vec![],
+            triangles: vec![[0, 1, 2]],
+        };
+        assert!(matches!(merge_f32_duplicates(&far), Cow::Borrowed(_)));
+    }
+}

@@ -1,0 +1,177 @@
+//! From the fitted field to the kept surface (normalised units): decide open or closed, polygonize
+//! (only the band the data support when open), trim, make the border manifold, drop floaters and
+//! small pieces.
+//!
+//! The rule for open or closed (`--boundary auto`, local carrier): data all around an object (a
+//! closed object with holes from occlusion, e.g. under its base) give a closed surface, the holes
+//! closed by the carrier; a single-view range scan or an open scene give an open surface on the
+//! data. It is decided on a coarse polygonization (a quarter of the resolution, ~1/16 of the
+//! triangles) without its floaters: when more than [`AUTO_TRIM_FRACTION`] of its area is farther
+//! than the support radius from every point, the carrier continues the data's own sheet far beyond
+//! them (an open scan) and the surface is trimmed; a closed object's unsupported patches are a tiny
+//! part (bunny 10k: 0.03%), and the carrier's blobs away from the data are floaters, not counted.
+//! A coarse surface that is not closed inside the domain (a sheet of the carrier attached to the
+//! object runs out to the box, as on thin limbs) counts as open too: trimming removes that sheet,
+//! closing would keep it; so does a final surface that is not closed inside the domain (a sheet too
+//! thin for the coarse pass): it is trimmed like an open scan.
+//!
+//! Open surfaces are polygonized only in the band the data support ([`DataBand`]: cells whose centre
+//! is within the support radius plus half a cell diagonal of a point), then the triangles whose
+//! centroid is farther than the support radius from every point are dropped (the rule used when the
+//! whole domain was polygonized and trimmed) except pinholes enclosed by kept surface
+//! ([`trim::keep_enclosed_holes`]: a data gap wider than the band stays a hole, a gap barely wider
+//! than the trim radius no longer leaves a one-triangle hole), and bow-tie vertices are removed
+//! ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary loop per
+//! border or hole. Every surface then loses its floaters (components carried by fewer than
+//! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
+//! pieces.
+
+use super::FittedField;
+use crate::error::ReconError;
+use crate::geometry::{Aabb, TriMesh};
+use crate::mesh::{area, floaters, trim};
+use crate::params::{Boundary, ReconParams};
+use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
+use crate::progress::{Progress, Stage};
+use crate::rbf::CarrierKind;
+
+/// Share of unsupported surface area above which `--boundary auto` trims: an open scan's
+/// extrapolated sheet is a large part of the surface; a closed scan's sparse patches are a tiny one.
+const AUTO_TRIM_FRACTION: f64 = 0.02;
+
+/// The coarse decision pass uses the resolution divided by this (at least [`COARSE_MIN`] cells).
+const COARSE_DIVISOR: usize = 4;
+
+/// Fewest cells along the longest axis of the coarse decision pass.
+const COARSE_MIN: usize = 16;
+
+/// What [`extract_surface`] did.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct SurfaceStats {
+    /// The polygonizer's statistics (of the final pass).
+    pub polygonize: crate::polygonize::PolygonizeStats,
+    /// Whether the surface was trimmed to the data (open).
+    pub open: bool,
+    /// Unsupported area share measured by the coarse pass (`--boundary auto` with the local
+    /// carrier only).
+    pub unsupported_share: Option<f64>,
+    /// Triangles the final pass produced.
+    pub triangles_polygonized: usize,
+    /// Triangles dropped because no data point is within the support radius of their centroid.
+    pub trimmed_triangles: usize,
+    /// Triangles dropped to make the trimmed border manifold.
+    pub border_triangles: usize,
+    /// Components dropped as floaters, and their triangles.
+    pub floaters_removed: usize,
+    /// Triangles in those components.
+    pub floater_triangles: usize,
+    /// Components dropped by `--min-component`, and their triangles.
+    pub small_components_removed: usize,
+    /// Triangles in those components.
+    pub small_component_triangles: usize,
+}
+
+/// Polygonize `fit.field` on `domain` at `resolution` and post-process it (see the module doc).
+pub(crate) fn extract_surface(
+    fit: &FittedField,
+    params: &ReconParams,
+    domain: &Aabb,
+    resolution: usize,
+    progress: &dyn Progress,
+) -> Result<(TriMesh, SurfaceStats), ReconError> {
+    let mut s = SurfaceStats::default();
+    let open = match params.boundary {
+        Boundary::Closed => false,
+        Boundary::Trim => true,
+        Boundary::Auto if fit.carrier != Some(CarrierKind::Local) => false,
+        Boundary::Auto => {
+            let share = unsupported_share(fit, params, domain, resolution, progress)?;
+            s.unsupported_share = Some(share);
+            share > AUTO_TRIM_FRACTION
+        }
+    };
+    let pp = PolygonizeParams {
+        resolution,
+        ..Default::default()
+    };
+    let band;
+    let region: &dyn Region = if open {
+        band = DataBand::new(&fit.points, fit.support_radius)?;
+        &band
+    } else {
+        &Everywhere
+    };
+    let (mut mesh, stats) = polygonize_in(fit.field.as_ref(), domain, &pp, region, progress)?;
+    s.polygonize = stats;
+    s.triangles_polygonized = mesh.triangles.len();
+    // Auto decided closed, but the surface leaves the domain (a thin sheet of the carrier the coarse
+    // pass missed): trim it like an open scan rather than keep a sheet out to the box.
+    let open = open
+        || (params.boundary == Boundary::Auto
+            && fit.carrier == Some(CarrierKind::Local)
+            && crate::mesh::analyze(&mesh).boundary_edges > 0);
+    s.open = open;
+    if open {
+        let mut drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
+        trim::keep_enclosed_holes(&mesh, &mut drop);
+        s.trimmed_triangles = trim::remove_triangles(&mut mesh, &drop);
+        s.border_triangles = crate::mesh::border::make_manifold(&mut mesh);
+    }
+    let (drop, n) = floaters::floaters(&mesh, &fit.points, fit.support_radius, params.min_support);
+    s.floaters_removed = n;
+    s.floater_triangles = trim::remove_triangles(&mut mesh, &drop);
+    let (drop, n) = trim::small_components(&mesh, params.min_component);
+    s.small_components_removed = n;
+    s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
+    Ok((mesh, s))
+}
+
+/// Share of the surface area farther than the support radius from every data point, measured on
+/// a coarse polygonization of the whole domain (normalised units) without its floaters (pieces of
+/// the carrier away from the data, which the final surface drops anyway): what is left unsupported
+/// is the carrier continuing the data's own sheet, i.e. an open scan. 1 when that surface is not
+/// closed inside the domain (a sheet of the carrier runs out to the box: only trimming removes it).
+fn unsupported_share(
+    fit: &FittedField,
+    params: &ReconParams,
+    domain: &Aabb,
+    resolution: usize,
+    progress: &dyn Progress,
+) -> Result<f64, ReconError> {
+    let cells = (resolution / COARSE_DIVISOR).max(COARSE_MIN);
+    let pp = PolygonizeParams {
+        resolution: cells,
+        refine_steps: 0,
+        ..Default::default()
+    };
+    let quiet = CancelOnly(progress);
+    let (mut mesh, _) = polygonize_in(fit.field.as_ref(), domain, &pp, &Everywhere, &quiet)?;
+    let longest = domain.extent().iter().fold(0.0f64, |a, &x| a.max(x));
+    let reach = fit.support_radius + 3f64.sqrt() * longest / cells as f64;
+    let (drop, _) = floaters::floaters(&mesh, &fit.points, reach, params.min_support);
+    trim::remove_triangles(&mut mesh, &drop);
+    if crate::mesh::analyze(&mesh).boundary_edges > 0 {
+        // The carrier's surface leaves the domain: closing it would keep a sheet out to the box.
+        return Ok(1.0);
+    }
+    let total = area(&mesh);
+    let drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
+    trim::remove_triangles(&mut mesh, &drop);
+    let supported = area(&mesh);
+    Ok(if total > 0.0 {
+        ((total - supported) / total).max(0.0)
+    } else {
+        0.0
+    })
+}
+
+/// Forwards only cancellation (the coarse pass does not move the progress bar).
+struct CancelOnly<'a>(&'a dyn Progress);
+
+impl Progress for CancelOnly<'_> {
+    fn stage(&self, _stage: Stage) {}
+    fn fraction(&self, _done: f64) {}
+    fn cancelled(&self) -> bool {
+        self.0.cancelled()
+    }
+}

@@ -1,0 +1,102 @@
+//! Open scans and floaters end to end: a range image with holes gives one manifold sheet on the data
+//! with one boundary loop per border or hole, polygonized only in the data band; two separate objects
+//! stay two closed components.
+
+use rbfsurf::geometry::PointCloud;
+use rbfsurf::geometry::synthetic::{Shape, SplitMix64};
+use rbfsurf::params::ReconParams;
+use rbfsurf::progress::NoProgress;
+use rbfsurf::reconstruct;
+use rbfsurf::spatial::KdTree;
+
+/// The height field `z = h(x, y)` of the range image and its upward unit normal.
+fn height(x: f64, y: f64) -> (f64, [f64; 3]) {
+    let z = 0.08 * (4.0 * x).sin() * (3.0 * y).cos();
+    let (dx, dy) = (
+        0.32 * (4.0 * x).cos() * (3.0 * y).cos(),
+        -0.24 * (4.0 * x).sin() * (3.0 * y).sin(),
+    );
+    let l = (dx * dx + dy * dy + 1.0).sqrt();
+    (z, [-dx / l, -dy / l, 1.0 / l])
+}
+
+/// A jittered `n × n` range image over the unit square with two round holes (radii 0.10 and 0.08,
+/// about 3× the support radius), with normals.
+fn range_image_with_holes(n: usize) -> PointCloud {
+    let mut rng = SplitMix64(11);
+    let holes = [([0.3, 0.35], 0.10), ([0.7, 0.65], 0.08)];
+    let (mut points, mut normals) = (Vec::new(), Vec::new());
+    for i in 0..n {
+        for j in 0..n {
+            let x = (i as f64 + 0.3 * rng.next_f64()) / n as f64;
+            let y = (j as f64 + 0.3 * rng.next_f64()) / n as f64;
+            if holes
+                .iter()
+                .any(|(c, r)| (x - c[0]).powi(2) + (y - c[1]).powi(2) < r * r)
+            {
+                continue;
+            }
+            let (z, nrm) = height(x, y);
+            points.push([x, y, z]);
+            normals.push(nrm);
+        }
+    }
+    PointCloud {
+        points,
+        normals: Some(normals),
+    }
+}
+
+#[test]
+fn a_range_image_with_holes_gives_one_manifold_sheet_polygonized_in_the_band() {
+    let cloud = range_image_with_holes(100);
+    let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    let (m, p) = (&rec.report.mesh, &rec.report.polygonize);
+    assert_eq!(rec.report.params.boundary, "trim");
+    assert!(p.unsupported_share.is_some_and(|s| s > 0.02), "{p:?}");
+    // One sheet with two holes: a disk minus two disks, χ = 1 − 2, three boundary loops.
+    assert!(!m.watertight && m.manifold && m.oriented, "{m:?}");
+    assert_eq!(
+        (m.components, m.boundary_loops, m.euler),
+        (1, 3, -1),
+        "{m:?}"
+    );
+    assert_eq!((m.non_manifold_vertices, m.non_manifold_edges), (0, 0));
+    // Only the band was polygonized: little was thrown away.
+    assert!(
+        (p.triangles_polygonized as f64) < 1.15 * m.triangles as f64,
+        "{p:?} vs {} kept",
+        m.triangles
+    );
+    // On the data: every vertex on the height field and within the support radius (plus a cell)
+    // of a data point.
+    let tree = KdTree::build(&cloud.points).unwrap();
+    let reach = rec.report.params.support_input_units + 2.0 * p.cell_size;
+    let mut sum = 0.0;
+    for v in &rec.mesh.vertices {
+        let err = (v[2] - height(v[0], v[1]).0).abs();
+        sum += err;
+        // A vertex is on a grid edge with a sign change: never more than a cell off.
+        assert!(err < p.cell_size, "vertex {v:?} is {err} off the surface");
+        let (_, d) = tree.nearest_one(v).unwrap();
+        assert!(
+            d <= reach,
+            "vertex {v:?} is {d} from the data (reach {reach})"
+        );
+    }
+    let mean = sum / rec.mesh.vertices.len() as f64;
+    assert!(mean < 1e-4, "mean vertex error {mean}");
+}
+
+#[test]
+fn two_spheres_without_normals_stay_two_closed_components() {
+    let shape = Shape::by_name("two-spheres").unwrap();
+    let mut cloud = shape.sample(4000, 7);
+    cloud.normals = None;
+    let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    let m = &rec.report.mesh;
+    assert!(m.watertight && m.manifold, "{m:?}");
+    assert_eq!((m.components, m.genus), (2, Some(0)), "{m:?}");
+    assert_eq!(rec.report.polygonize.floaters_removed, 0);
+    assert_eq!(rec.report.params.boundary, "closed");
+}
