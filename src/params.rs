@@ -143,9 +143,10 @@ pub struct ReconParams {
     /// Memory budget for the matrix and its factor, MiB (default 8192). Bigger systems are refused
     /// before allocation, with an estimate.
     pub max_memory_mib: u64,
-    /// Smoothing λ added to the matrix diagonal (default 0 = interpolate; 1e-3–1e-1 for noisy scans):
-    /// `(A + λI) λ = r` approximates instead of interpolating.
-    pub smoothing: f64,
+    /// Smoothing λ added to the matrix diagonal: `(A + λI) λ = r` approximates instead of
+    /// interpolating. Default `auto`: chosen from the measured noise (0 on clean data, see
+    /// [`crate::rbf::noise`]).
+    pub smoothing: Smoothing,
     /// Statistical outlier removal before fitting (default off).
     pub outliers: Option<crate::clean::outliers::OutlierParams>,
     /// Unsupported surface: trim or keep (default `auto`).
@@ -181,13 +182,33 @@ impl Default for ReconParams {
             resolution: None,
             clean: CleanParams::default(),
             max_memory_mib: 8192,
-            smoothing: 0.0,
+            smoothing: Smoothing::Auto,
             outliers: None,
             boundary: Boundary::Auto,
             levels: 1,
             blocks: crate::rbf::Blocks::Auto,
             min_component: 0.0,
             min_support: 0.01,
+        }
+    }
+}
+
+/// How the smoothing λ on the matrix diagonal is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Smoothing {
+    /// From the measured noise ([`crate::rbf::noise::estimate_noise`]): 0 on clean data.
+    #[default]
+    Auto,
+    /// This λ (0 = interpolate).
+    Lambda(f64),
+}
+
+impl Smoothing {
+    /// The fixed λ (0 for `Auto`, which the pipeline resolves before assembly).
+    pub fn lambda(self) -> f64 {
+        match self {
+            Smoothing::Auto => 0.0,
+            Smoothing::Lambda(l) => l,
         }
     }
 }
@@ -247,12 +268,10 @@ impl ReconParams {
                 "a fraction of the bbox diagonal in [0, 0.01]",
             );
         }
-        if !(self.smoothing.is_finite() && (0.0..=10.0).contains(&self.smoothing)) {
-            return err(
-                "smoothing",
-                self.smoothing.to_string(),
-                "a number in [0, 10]",
-            );
+        if let Smoothing::Lambda(l) = self.smoothing
+            && !(l.is_finite() && (0.0..=10.0).contains(&l))
+        {
+            return err("smoothing", l.to_string(), "a number in [0, 10]");
         }
         if let Some(o) = self.outliers
             && !(o.std_ratio.is_finite() && o.std_ratio > 0.0 && (2..=200).contains(&o.neighbours))
@@ -363,7 +382,7 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long, visible_alias = "max-memory"))]
     #[serde(default, alias = "max-memory")]
     pub max_memory_mib: Option<u64>,
-    /// Smoothing λ on the matrix diagonal: 0 (default) interpolates; 1e-3..1e-1 for noisy scans.
+    /// Smoothing λ on the matrix diagonal: 0 interpolates, 1e-3..1 approximates noisy scans; default: chosen from the measured noise (0 on clean data; report params.noise).
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub smoothing: Option<f64>,
@@ -419,7 +438,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
                 merge_tolerance: a.merge_tolerance.unwrap_or(d.clean.merge_tolerance),
             },
             max_memory_mib: a.max_memory_mib.unwrap_or(d.max_memory_mib),
-            smoothing: a.smoothing.unwrap_or(d.smoothing),
+            smoothing: a.smoothing.map_or(d.smoothing, Smoothing::Lambda),
             outliers: a
                 .outlier_std_ratio
                 .map(|std_ratio| crate::clean::outliers::OutlierParams {

@@ -52,8 +52,10 @@ pub struct ParamsReport {
     pub index: String,
     /// Whether input normals were flipped because they pointed inwards.
     pub normals_flipped: bool,
-    /// Smoothing λ on the diagonal (0 = interpolation).
+    /// Smoothing λ on the diagonal actually used (0 = interpolation; chosen from `noise` by default).
     pub smoothing: f64,
+    /// Measured noise level and the λ it chooses (see `rbf::noise`).
+    pub noise: crate::rbf::NoiseEstimate,
     /// Unsupported surface handling actually applied: `trim` or `closed`.
     pub boundary: &'static str,
     /// Where the normals came from: `input`, `input-reoriented` (inconsistent input orientation made

@@ -6,7 +6,7 @@ use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverKind, SolverParams, factorize_owned, solve_bordered};
 use crate::normals::{NormalParams, estimate_oriented_normals};
 use crate::ordering::{MatrixShape, Permutation, compute_ordering, matrix_shape};
-use crate::params::{Method, Polynomial, ReconParams};
+use crate::params::{Method, Polynomial, ReconParams, Smoothing};
 use crate::progress::Progress;
 use crate::rbf::{
     Carrier, CarrierKind, Correction, Kernel, LevelPlan, RbfError, RbfField, Spline, SplineLevel,
@@ -37,6 +37,17 @@ pub fn fit_field(
     check_surface(&points, index.as_ref())?;
     let normals_reoriented = reorient_inconsistent_normals(&mut clean, &points, index.as_ref());
     let support = estimate_support(&points, index.as_ref(), params.support)?;
+    let noise = crate::rbf::estimate_noise(&points, support.spacing, |p, k, out| {
+        index.nearest_k(p, k, out)
+    });
+    let resolved = ReconParams {
+        smoothing: Smoothing::Lambda(match params.smoothing {
+            Smoothing::Auto => noise.lambda,
+            Smoothing::Lambda(l) => l,
+        }),
+        ..params.clone()
+    };
+    let params = &resolved;
     let count = params.levels;
     // With blocks only one block's system is alive at a time (core plus overlap: ~1.5× its core).
     let alive = params
@@ -107,6 +118,8 @@ pub fn fit_field(
         normals_flipped,
         normals_estimated,
         normals_reoriented,
+        noise,
+        smoothing: params.smoothing.lambda(),
     })
 }
 
@@ -275,7 +288,7 @@ fn assemble_and_order(
         index,
         params.kernel,
         radius,
-        params.smoothing,
+        params.smoothing.lambda(),
         progress,
     )?;
     timings.assemble += t.elapsed().as_secs_f64();

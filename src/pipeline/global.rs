@@ -74,5 +74,7 @@ pub(super) fn fit_global(
         normals_flipped: false,
         normals_estimated: false,
         normals_reoriented: 0,
+        noise: Default::default(),
+        smoothing: 0.0,
     })
 }

@@ -61,6 +61,10 @@ pub struct FittedField {
     pub normals_estimated: bool,
     /// Input normals flipped to make an inconsistent orientation consistent (0 = none).
     pub normals_reoriented: usize,
+    /// Measured noise (CSRBF; default for the global methods).
+    pub noise: crate::rbf::NoiseEstimate,
+    /// Smoothing λ used on the diagonal (0 = interpolation).
+    pub smoothing: f64,
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
@@ -216,7 +220,8 @@ fn params_report(
         resolution,
         index: params.index.to_string(),
         normals_flipped: fit.normals_flipped,
-        smoothing: params.smoothing,
+        smoothing: fit.smoothing,
+        noise: fit.noise,
         boundary: if trim { "trim" } else { "closed" },
         normals_reoriented: fit.normals_reoriented,
         normals: if fit.normals_estimated {

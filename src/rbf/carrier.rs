@@ -13,7 +13,7 @@
 //!   and concavities keep the right sign.
 
 use super::Kernel;
-use crate::geometry::{Aabb, Point3, dot, norm, normalized, pca::pca, sub};
+use crate::geometry::{Aabb, Point3, dist2, dot, norm, normalized, pca::pca, sub};
 use crate::spatial::{KdTree, SpatialIndex};
 use std::sync::Arc;
 
@@ -215,6 +215,9 @@ fn ellipsoid_local(
     ([u[0] / semi[0], u[1] / semi[1], u[2] / semi[2]], u)
 }
 
+/// Fewest points the local carrier blends at any `x` (the far field's vote, see [`LocalCarrier`]).
+pub const FAR_NEIGHBOURS: usize = 16;
+
 /// Parameters of carrier fitting.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CarrierParams {
@@ -325,11 +328,16 @@ pub fn fit_ellipsoid(points: &[Point3]) -> Result<Carrier, CarrierError> {
     })
 }
 
-/// Partition of unity of the tangent planes of the oriented points within the support radius `R`:
-/// `g(x) = Σ w_j n_j·(x − p_j) / Σ w_j` with `w_j = ψ(|x − p_j| / R)` (ψ = Wendland C²). Where no
-/// point is within `R`, `g` is the signed distance to the nearest point's tangent plane (Hoppe et al.
-/// 1992): at the edge of the band the last point reaching `x` is the nearest one, so `g` stays
-/// continuous. Sharing `R` with the spline lets one neighbour query serve both sums.
+/// Partition of unity of the tangent planes of the oriented points within the radius
+/// `ρ(x) = max(R, d_K(x))` (`R` the support radius, `d_K(x)` the distance from `x` to its
+/// [`FAR_NEIGHBOURS`]-th nearest point with a usable normal):
+/// `g(x) = Σ w_j n_j·(x − p_j) / Σ w_j` with `w_j = ψ(|x − p_j| / ρ(x))` (ψ = Wendland C²).
+/// Near the data `ρ = R`, so sharing `R` with the spline lets one neighbour query serve both sums.
+/// Where fewer than K points lie within `R` (sparse parts, off the data) the weights widen to the K
+/// nearest points; `ρ` is continuous (at the switch `d_K = R`, and the K-th point has weight 0), so
+/// `g` is. Earlier versions used the single nearest point's plane there (Hoppe et al. 1992): one
+/// badly estimated normal on a thin part (the bunny's ears: PCA normals 87° off) then made a
+/// negative pocket in its Voronoi cell, a closed blob off the surface. K planes outvote it.
 pub struct LocalCarrier {
     points: Vec<Point3>,
     /// Unit normals; zero where the input normal was unusable (such points get no weight).
@@ -396,25 +404,66 @@ impl LocalCarrier {
 
     /// `(g(x), ∇g(x))` given `candidates`, a superset of the points within `R` of `x`.
     pub fn value_gradient_with(&self, x: &Point3, candidates: &[u32]) -> (f64, Point3) {
-        let (r2, inv_r) = (self.radius * self.radius, 1.0 / self.radius);
+        let r2 = self.radius * self.radius;
+        let within = candidates
+            .iter()
+            .filter(|&&j| {
+                let j = j as usize;
+                self.normals[j] != [0.0; 3] && dist2(*x, self.points[j]) < r2
+            })
+            .count();
+        if within >= FAR_NEIGHBOURS {
+            return self.blend(x, candidates, self.radius, None);
+        }
+        // Fewer than K usable points within R: widen the weights to the K nearest ones.
+        let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
+        self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
+        let Some(&(kth, rho)) = knn.last() else {
+            return (0.0, [0.0; 3]);
+        };
+        let ids: Vec<u32> = knn
+            .iter()
+            .map(|&(i, _)| self.valid_ids[i as usize])
+            .collect();
+        if rho <= self.radius {
+            // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
+            return self.blend(x, &ids, self.radius, None);
+        }
+        let far = self.points[self.valid_ids[kth as usize] as usize];
+        let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
+        self.blend(x, &ids, rho, Some(grad_rho))
+    }
+
+    /// `g = Σ w_j n_j·(x − p_j) / Σ w_j` and its gradient over the points `ids` with
+    /// `w_j = ψ(|x − p_j| / ρ)`; `grad_rho` is `∇ρ` when the radius depends on `x` (`None`: fixed).
+    fn blend(&self, x: &Point3, ids: &[u32], rho: f64, grad_rho: Option<Point3>) -> (f64, Point3) {
+        let (r2, inv_r) = (rho * rho, 1.0 / rho);
         let (mut sw, mut swd) = (0.0, 0.0);
         let (mut sg, mut sdw) = ([0.0; 3], [0.0; 3]);
-        for &j in candidates {
+        for &j in ids {
             let j = j as usize;
             let diff = sub(*x, self.points[j]);
             let d2 = dot(diff, diff);
-            if d2 >= r2 || self.normals[j] == [0.0; 3] {
+            let n = self.normals[j];
+            if d2 >= r2 || n == [0.0; 3] {
                 continue;
             }
             let t = d2.sqrt() * inv_r;
             let w = Kernel::WendlandC2.value(t);
             let dw_over = Kernel::WendlandC2.derivative_over_r(t) * inv_r * inv_r;
-            let dist = dot(self.normals[j], diff);
+            // ∇ψ(|x − p|/ρ) = ψ'(t)/t · [(x − p)/ρ² − |x − p|²/ρ³ ∇ρ]
+            let mut dw = [dw_over * diff[0], dw_over * diff[1], dw_over * diff[2]];
+            if let Some(gr) = grad_rho {
+                for k in 0..3 {
+                    dw[k] -= dw_over * d2 * inv_r * gr[k];
+                }
+            }
+            let dist = dot(n, diff);
             sw += w;
             swd += w * dist;
             for k in 0..3 {
-                sg[k] += w * self.normals[j][k] + dw_over * diff[k] * dist;
-                sdw[k] += dw_over * diff[k];
+                sg[k] += w * n[k] + dw[k] * dist;
+                sdw[k] += dw[k];
             }
         }
         if sw <= 0.0 {
@@ -532,6 +581,33 @@ mod tests {
                         g[k]
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn one_bad_normal_makes_no_pocket_off_the_data() {
+        // A sphere of radius 0.3 with one normal turned 87° (as PCA gives on a thin ear): off the
+        // data, beyond the band R, the carrier must stay positive outside the sphere.
+        let (p, mut n) = sphere_points(2000, [0.5; 3], 0.3);
+        let bad = 1000;
+        let u = n[bad];
+        let t = normalized([u[1], -u[0], 0.0]).unwrap();
+        n[bad] = normalized([0.05 * u[0] + t[0], 0.05 * u[1] + t[1], 0.05 * u[2] + t[2]]).unwrap();
+        let r = 0.04;
+        let c = local(&p, &n, r);
+        for s in [1.2, 1.6, 2.5, 4.0] {
+            for dir in [t, [-t[0], -t[1], -t[2]]] {
+                // Off the bad point, outward by s·R and sideways along its wrong plane.
+                let x = [
+                    p[bad][0] + s * r * (u[0] + 0.3 * dir[0]),
+                    p[bad][1] + s * r * (u[1] + 0.3 * dir[1]),
+                    p[bad][2] + s * r * (u[2] + 0.3 * dir[2]),
+                ];
+                let outside = norm(sub(x, [0.5; 3])) - 0.3;
+                assert!(outside > 0.0);
+                let (g, _) = c.value_gradient(&x);
+                assert!(g > 0.0, "g = {g} at {x:?}, {outside} outside the sphere");
             }
         }
     }

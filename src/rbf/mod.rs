@@ -8,6 +8,7 @@ pub mod carrier;
 pub mod field;
 pub mod kernel;
 pub mod levels;
+pub mod noise;
 pub mod pou;
 pub mod support;
 
@@ -16,6 +17,7 @@ pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, fit_carrier
 pub use field::{Correction, RbfField, Spline, SplineLevel, linear_poly};
 pub use kernel::Kernel;
 pub use levels::{LevelPlan, plan_levels};
+pub use noise::{NoiseEstimate, estimate_noise};
 pub use pou::{BlockPlan, Blocks, PouBlock, plan_blocks};
 pub use support::{Support, SupportEstimate, estimate_support};
 

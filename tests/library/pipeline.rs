@@ -331,7 +331,7 @@ fn smoothing_and_outlier_removal_handle_a_noisy_scan() {
         }
     }
     let p = ReconParams {
-        smoothing: 0.05,
+        smoothing: rbfsurf::params::Smoothing::Lambda(0.05),
         outliers: Some(Default::default()),
         ..Default::default()
     };

@@ -27,7 +27,8 @@ function choose(file) {
 
 function queryString() {
   const q = new URLSearchParams();
-  for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver"]) {
+  for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver", "boundary",
+                   "min-component", "smoothing", "outlier-std-ratio"]) {
     const v = $(k).value.trim();
     if (v) q.set(k, v);
   }

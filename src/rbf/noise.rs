@@ -1,0 +1,227 @@
+//! Noise level of a point cloud and the smoothing chosen from it.
+//!
+//! At each of at most [`SAMPLES`] sampled points, a height field `w = a + b u + c v + d u² + e uv + f v²`
+//! is fitted by least squares to its `k` nearest neighbours in their PCA frame; the unbiased RMS
+//! residual `√(Σ r² / (k − 6))` is that point's noise estimate. The median over the sample at
+//! `k = 12` is the noise level σ; the same median at `k = 48` tells noise from geometry: Gaussian
+//! noise gives the same residual at both scales (measured ratio 1.11–1.15 on noisy tori), whereas
+//! what a quadric cannot follow (fine detail, curvature change, the two faces of a thin wall)
+//! grows with the neighbourhood (bunny 6.9, kitten 6.9, oni 6.8, a thin-walled building 1.4,
+//! clean torus 15). σ counts as noise only when the ratio is below [`FLAT_RATIO`].
+//!
+//! Smoothing: interpolation (`λ = 0`) unless the noise is flat across scales and at least
+//! [`NOISE_FLOOR`] of the spacing `h`; then `λ = LAMBDA_PER_NOISE · σ / h`, capped at [`MAX_LAMBDA`].
+//! `O(s · k log n)` with `s ≤ 1000`.
+
+use crate::geometry::{Point3, dot, pca::pca, sub};
+
+/// Most sampled points.
+const SAMPLES: usize = 1000;
+/// Neighbourhood of the noise estimate.
+const SMALL_K: usize = 12;
+/// Neighbourhood of the scale check.
+const LARGE_K: usize = 48;
+/// Residual ratio (k = 48 over k = 12) below which the residual is taken for noise.
+pub const FLAT_RATIO: f64 = 1.3;
+/// Noise below this fraction of the spacing is left to interpolation.
+pub const NOISE_FLOOR: f64 = 0.05;
+/// λ per unit of σ / h.
+pub const LAMBDA_PER_NOISE: f64 = 2.0;
+/// Largest automatic λ.
+pub const MAX_LAMBDA: f64 = 1.0;
+
+/// The measured noise and the smoothing chosen from it.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct NoiseEstimate {
+    /// Median RMS residual of local quadric fits over 12 neighbours, normalised units.
+    pub sigma: f64,
+    /// `sigma` over the median nearest-neighbour spacing.
+    pub sigma_over_spacing: f64,
+    /// Median residual at 48 neighbours over the one at 12 (≈ 1 for noise, ≫ 1 for geometry).
+    pub scale_ratio: f64,
+    /// Whether the residual is taken for noise.
+    pub noisy: bool,
+    /// The smoothing λ this estimate chooses (0 = interpolate).
+    pub lambda: f64,
+}
+
+/// Estimate the noise of `points` (normalised units) with median spacing `spacing`, finding
+/// neighbours with `nearest_k` (a point is its own first neighbour).
+pub fn estimate_noise(
+    points: &[Point3],
+    spacing: f64,
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+) -> NoiseEstimate {
+    if points.len() < 4 * LARGE_K || spacing.is_nan() || spacing <= 0.0 {
+        return NoiseEstimate::default();
+    }
+    let small = median_residual(points, SMALL_K, &nearest_k);
+    let large = median_residual(points, LARGE_K, &nearest_k);
+    let ratio = if small > 0.0 {
+        large / small
+    } else {
+        f64::INFINITY
+    };
+    let rel = small / spacing;
+    let noisy = ratio < FLAT_RATIO && rel >= NOISE_FLOOR;
+    NoiseEstimate {
+        sigma: small,
+        sigma_over_spacing: rel,
+        scale_ratio: ratio,
+        noisy,
+        lambda: if noisy {
+            (LAMBDA_PER_NOISE * rel).min(MAX_LAMBDA)
+        } else {
+            0.0
+        },
+    }
+}
+
+/// Median over the sampled points of the quadric-fit residual over `k` neighbours.
+fn median_residual(
+    points: &[Point3],
+    k: usize,
+    nearest_k: &impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+) -> f64 {
+    let step = (points.len() / SAMPLES).max(1);
+    let mut knn = Vec::new();
+    let mut nb = Vec::new();
+    let mut res: Vec<f64> = (0..points.len())
+        .step_by(step)
+        .filter_map(|i| {
+            nearest_k(&points[i], k, &mut knn);
+            nb.clear();
+            nb.extend(knn.iter().map(|&(j, _)| points[j as usize]));
+            quadric_residual(&nb)
+        })
+        .collect();
+    if res.is_empty() {
+        return 0.0;
+    }
+    let mid = res.len() / 2;
+    *res.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Unbiased RMS residual of the least-squares height-field quadric through `nb` (≥ 8 points) in
+/// its PCA frame; `None` when degenerate.
+fn quadric_residual(nb: &[Point3]) -> Option<f64> {
+    if nb.len() < 8 {
+        return None;
+    }
+    let p = pca(nb);
+    let mut m = [[0.0f64; 7]; 6];
+    // Tangent coordinates scaled to about [−1, 1] for conditioning (the residual stays in w's units).
+    let reach = nb
+        .iter()
+        .map(|q| crate::geometry::dist2(*q, p.centroid))
+        .fold(0.0, f64::max)
+        .sqrt();
+    if reach.is_nan() || reach <= 0.0 {
+        return None;
+    }
+    let rows: Vec<([f64; 6], f64)> = nb
+        .iter()
+        .map(|q| {
+            let d = sub(*q, p.centroid);
+            let (u, v) = (dot(d, p.axes[0]) / reach, dot(d, p.axes[1]) / reach);
+            let w = dot(d, p.axes[2]);
+            ([1.0, u, v, u * u, u * v, v * v], w)
+        })
+        .collect();
+    for (row, w) in &rows {
+        for a in 0..6 {
+            for b in 0..6 {
+                m[a][b] += row[a] * row[b];
+            }
+            m[a][6] += row[a] * w;
+        }
+    }
+    let coef = solve6(m)?;
+    let rss: f64 = rows
+        .iter()
+        .map(|(row, w)| {
+            let fit: f64 = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
+            (w - fit) * (w - fit)
+        })
+        .sum();
+    Some((rss / (nb.len() - 6) as f64).sqrt())
+}
+
+/// Gaussian elimination with partial pivoting on a 6×6 augmented system.
+#[allow(clippy::needless_range_loop)] // elimination on a fixed-size matrix
+fn solve6(mut m: [[f64; 7]; 6]) -> Option<[f64; 6]> {
+    let scale = (0..6).map(|i| m[i][i].abs()).fold(0.0, f64::max);
+    for col in 0..6 {
+        let piv = (col..6).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[piv][col].abs() <= 1e-14 * scale {
+            return None;
+        }
+        m.swap(col, piv);
+        for r in col + 1..6 {
+            let f = m[r][col] / m[col][col];
+            for c in col..7 {
+                m[r][c] -= f * m[col][c];
+            }
+        }
+    }
+    let mut x = [0.0; 6];
+    for r in (0..6).rev() {
+        let s: f64 = (r + 1..6).map(|c| m[r][c] * x[c]).sum();
+        x[r] = (m[r][6] - s) / m[r][r];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{norm, synthetic::Shape};
+    use crate::spatial::{IndexKind, build_index};
+
+    fn estimate(points: &[Point3]) -> NoiseEstimate {
+        let idx = build_index(points, IndexKind::KdTree, 16).unwrap();
+        let mut knn = Vec::new();
+        let mut sp: Vec<f64> = points
+            .iter()
+            .map(|p| {
+                idx.nearest_k(p, 2, &mut knn);
+                knn[1].1
+            })
+            .collect();
+        let mid = sp.len() / 2;
+        let h = *sp.select_nth_unstable_by(mid, f64::total_cmp).1;
+        estimate_noise(points, h, |p, k, out| idx.nearest_k(p, k, out))
+    }
+
+    #[test]
+    fn clean_sphere_interpolates_and_noisy_sphere_is_measured() {
+        let cloud = Shape::by_name("sphere").unwrap().sample(20000, 5);
+        let clean = estimate(&cloud.points);
+        assert!(!clean.noisy && clean.lambda == 0.0, "{clean:?}");
+        assert!(clean.sigma_over_spacing < 0.01, "{clean:?}");
+        // Radial Gaussian noise of known σ (a deterministic Box–Muller sequence).
+        let sigma = 0.004;
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let noisy: Vec<Point3> = cloud
+            .points
+            .iter()
+            .map(|p| {
+                let g = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
+                let c = [0.5; 3];
+                let d = sub(*p, c);
+                let s = 1.0 + sigma * g / norm(d);
+                [c[0] + d[0] * s, c[1] + d[1] * s, c[2] + d[2] * s]
+            })
+            .collect();
+        let e = estimate(&noisy);
+        assert!(e.noisy && e.lambda > 0.0, "{e:?}");
+        assert!((e.sigma / sigma - 1.0).abs() < 0.3, "{e:?} vs σ = {sigma}");
+        assert!(e.scale_ratio < FLAT_RATIO, "{e:?}");
+    }
+}
