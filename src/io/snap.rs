@@ -75,7 +75,7 @@ mod tests {
     use crate::mesh::analyze;
 
     #[test]
-    fn vertices_one_f32_apart_are_merged_and_never_make_degenerate_triangles() {
+    fn vertices_one_f32_apart_are_merged_and_their_sliver_dropped() {
         // A square pyramid's apex split into two vertices 1e-9 apart at coordinate ~1e3 (f32 spacing
         // there is 6e-5), joined by a sliver triangle pair.
         let b = 1000.0;
@@ -106,37 +106,33 @@ mod tests {
         assert_eq!(t.degenerate_triangles, 0);
         assert!(t.watertight && t.manifold && t.oriented, "{t:?}");
         assert_eq!(merged.triangles.len(), 6);
-        // Written as GLB (positions relative to a node translation, as the mesh is far from the
-        // origin) and read back, then welded by position: still no degenerate triangle, and the
-        // positions are back within f32 rounding of the relative coordinates.
-        let back = crate::io::decode_glb(&crate::io::encode_glb(&mesh).unwrap()).unwrap();
-        let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
-        let weld: Vec<u32> = back
-            .vertices
-            .iter()
-            .map(|p| {
-                let n = ids.len() as u32;
-                *ids.entry(p.map(f64::to_bits)).or_insert(n)
-            })
-            .collect();
-        let welded = TriMesh {
-            vertices: back.vertices.clone(),
-            normals: vec![],
-            triangles: back
-                .triangles
-                .iter()
-                .map(|t| t.map(|v| weld[v as usize]))
-                .collect(),
-        };
-        assert_eq!(analyze(&welded).degenerate_triangles, 0);
-        // Relative to the node translation (the bbox centre) the two apex vertices are 1e-9 apart
-        // near 0.5, distinct in f32: nothing needs merging and the sliver pair is kept, not degenerate.
-        assert_eq!(back.triangles.len(), 8);
-        assert!(
-            (back.vertices[1][0] - (b + 1.0)).abs() < 1e-6,
-            "{:?}",
-            back.vertices[1]
-        );
+        // Written as GLB and read back, then welded by position: no degenerate triangle. Far from
+        // the origin the positions are stored relative to a node translation, so the two apexes
+        // stay distinct (8 triangles, back at their place); near the origin they are merged (6).
+        for (shift, triangles) in [(0.0, 6), (b, 8)] {
+            let mut m = mesh.clone();
+            for p in &mut m.vertices {
+                *p = p.map(|c| c - b + shift);
+            }
+            let back = crate::io::decode_glb(&crate::io::encode_glb(&m).unwrap()).unwrap();
+            let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
+            let weld: Vec<u32> = (back.vertices.iter())
+                .map(|p| {
+                    let n = ids.len() as u32;
+                    *ids.entry(p.map(f64::to_bits)).or_insert(n)
+                })
+                .collect();
+            let welded = TriMesh {
+                vertices: back.vertices.clone(),
+                normals: vec![],
+                triangles: (back.triangles.iter())
+                    .map(|t| t.map(|v| weld[v as usize]))
+                    .collect(),
+            };
+            assert_eq!(analyze(&welded).degenerate_triangles, 0, "shift {shift}");
+            assert_eq!(back.triangles.len(), triangles, "shift {shift}");
+            assert!((back.vertices[1][0] - (shift + 1.0)).abs() < 1e-6);
+        }
         // The PLY writer (f32 too) merges the same way.
         let ply = crate::io::write::encode_ply(&mesh).unwrap();
         let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
