@@ -8,9 +8,7 @@ use crate::params::{Boundary, Method, ReconParams};
 use crate::polygonize::ScalarField;
 use crate::progress::Progress;
 use crate::rbf::SupportEstimate;
-use crate::report::{
-    MatrixReport, ParamsReport, PolygonizeReport, Report, ResidualReport, Timings, peak_rss_mib,
-};
+use crate::report::{MatrixReport, ParamsReport, Report, ResidualReport, Timings, peak_rss_mib};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -127,7 +125,7 @@ fn reconstruct_inner(
     let (domain, grid_resolution) = polygonize_domain(&fit, resolution, params.boundary);
     progress.stage(crate::progress::Stage::Polygonize);
     let t = Instant::now();
-    let (mut mesh, surface) =
+    let (mut mesh, open, polygonize) =
         surface::extract_surface(&fit, params, &domain, grid_resolution, progress)?;
     timings.polygonize = t.elapsed().as_secs_f64();
     progress.stage(crate::progress::Stage::Post);
@@ -141,7 +139,7 @@ fn reconstruct_inner(
     timings.total = start.elapsed().as_secs_f64();
     let report = Report {
         input: fit.clean,
-        params: params_report(params, &fit, resolution, surface.open),
+        params: params_report(params, &fit, resolution, open),
         matrix: fit.matrix.clone(),
         residual: fit.residual,
         mesh: topology,
@@ -149,22 +147,7 @@ fn reconstruct_inner(
         memory: crate::report::MemoryReport {
             peak_rss_mib: peak_rss_mib(),
         },
-        polygonize: PolygonizeReport {
-            cells_total: surface.polygonize.cells_total,
-            blocks_total: surface.polygonize.blocks_total,
-            blocks_active: surface.polygonize.blocks_active,
-            field_evaluations: surface.polygonize.field_evaluations,
-            unsupported_share: surface.unsupported_share,
-            triangles_polygonized: surface.triangles_polygonized,
-            trimmed_triangles: surface.trimmed_triangles,
-            border_triangles: surface.border_triangles,
-            floaters_removed: surface.floaters_removed,
-            floater_triangles: surface.floater_triangles,
-            small_components_removed: surface.small_components_removed,
-            small_component_triangles: surface.small_component_triangles,
-            cell_size: domain.extent().iter().fold(0.0f64, |a, &b| a.max(b))
-                / grid_resolution as f64,
-        },
+        polygonize,
     };
     Ok(Reconstruction { mesh, report })
 }

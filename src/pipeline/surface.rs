@@ -34,6 +34,7 @@ use crate::params::{Boundary, ReconParams};
 use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
 use crate::progress::{Progress, Stage};
 use crate::rbf::CarrierKind;
+use crate::report::PolygonizeReport;
 
 /// Share of unsupported surface area above which `--boundary auto` trims: an open scan's
 /// extrapolated sheet is a large part of the surface; a closed scan's sparse patches are a tiny one.
@@ -45,41 +46,20 @@ const COARSE_DIVISOR: usize = 4;
 /// Fewest cells along the longest axis of the coarse decision pass.
 const COARSE_MIN: usize = 16;
 
-/// What [`extract_surface`] did.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct SurfaceStats {
-    /// The polygonizer's statistics (of the final pass).
-    pub polygonize: crate::polygonize::PolygonizeStats,
-    /// Whether the surface was trimmed to the data (open).
-    pub open: bool,
-    /// Unsupported area share measured by the coarse pass (`--boundary auto` with the local
-    /// carrier only).
-    pub unsupported_share: Option<f64>,
-    /// Triangles the final pass produced.
-    pub triangles_polygonized: usize,
-    /// Triangles dropped because no data point is within the support radius of their centroid.
-    pub trimmed_triangles: usize,
-    /// Triangles dropped to make the trimmed border manifold.
-    pub border_triangles: usize,
-    /// Components dropped as floaters, and their triangles.
-    pub floaters_removed: usize,
-    /// Triangles in those components.
-    pub floater_triangles: usize,
-    /// Components dropped by `--min-component`, and their triangles.
-    pub small_components_removed: usize,
-    /// Triangles in those components.
-    pub small_component_triangles: usize,
-}
-
 /// Polygonize `fit.field` on `domain` at `resolution` and post-process it (see the module doc).
+/// Returns the mesh, whether it was trimmed open, and the report's `polygonize` section.
 pub(crate) fn extract_surface(
     fit: &FittedField,
     params: &ReconParams,
     domain: &Aabb,
     resolution: usize,
     progress: &dyn Progress,
-) -> Result<(TriMesh, SurfaceStats), ReconError> {
-    let mut s = SurfaceStats::default();
+) -> Result<(TriMesh, bool, PolygonizeReport), ReconError> {
+    let longest = domain.extent().iter().fold(0.0f64, |a, &b| a.max(b));
+    let mut s = PolygonizeReport {
+        cell_size: longest / resolution as f64,
+        ..Default::default()
+    };
     let open = match params.boundary {
         Boundary::Closed => false,
         Boundary::Trim => true,
@@ -102,7 +82,10 @@ pub(crate) fn extract_surface(
         &Everywhere
     };
     let (mut mesh, stats) = polygonize_in(fit.field.as_ref(), domain, &pp, region, progress)?;
-    s.polygonize = stats;
+    s.cells_total = stats.cells_total;
+    s.blocks_total = stats.blocks_total;
+    s.blocks_active = stats.blocks_active;
+    s.field_evaluations = stats.field_evaluations;
     s.triangles_polygonized = mesh.triangles.len();
     // Auto decided closed, but the surface leaves the domain (a thin sheet of the carrier the coarse
     // pass missed): trim it like an open scan rather than keep a sheet out to the box.
@@ -110,7 +93,6 @@ pub(crate) fn extract_surface(
         || (params.boundary == Boundary::Auto
             && fit.carrier == Some(CarrierKind::Local)
             && crate::mesh::analyze(&mesh).boundary_edges > 0);
-    s.open = open;
     if open {
         let mut drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
         trim::keep_enclosed_holes(&mesh, &mut drop);
@@ -123,7 +105,7 @@ pub(crate) fn extract_surface(
     let (drop, n) = trim::small_components(&mesh, params.min_component);
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
-    Ok((mesh, s))
+    Ok((mesh, open, s))
 }
 
 /// Share of the surface area farther than the support radius from every data point, measured on
