@@ -84,14 +84,14 @@ if [[ -x $BIN ]]; then
 else
   echo "no rbfsurf binary at $BIN: synthetic inputs skipped" >&2
 fi
-# 5. the floor of the mesh->scan measure: the truth mesh's own distance to the points (half the point
-#    spacing, roughly), for the inputs that have a truth mesh
+# 5. the floor of the mesh->scan measure: the truth mesh's own distance to the plane of the points' neighbours
+#    (noise and sampling), for the inputs that have a truth mesh
 if [[ -x $BIN ]]; then
   : > "$OUT/floors.tsv"
   while IFS=$'\t' read -r name in ref _; do
     [[ $ref == - || $ref == onesided:* ]] && continue
     "$BIN" compare "$ref" "$in" --json 2> /dev/null \
-      | python3 -c 'import json,sys; print(sys.argv[1] + "\t" + str(json.load(sys.stdin)["mesh_to_ref_mean_rel"]))' "$name" \
+      | python3 -c 'import json,sys; print(sys.argv[1] + "\t" + str(json.load(sys.stdin).get("mesh_to_ref_plane_mean_rel")))' "$name" \
       >> "$OUT/floors.tsv" || true
   done < "$OUT/manifest.tsv"
 fi

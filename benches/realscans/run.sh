@@ -117,7 +117,7 @@ measure() {
   local topo="- - - - - - -" m2s=- cham=-
   if [[ $status == ok ]] && timeout "$TIMEOUT" "$BIN" compare "$mesh" "$in" --json > "$c" 2> "$c.err"; then
     topo="$(json "$c" mesh.components) $(json "$c" mesh.watertight) $(json "$c" mesh.genus) $(json "$c" mesh.boundary_loops) $(json "$c" mesh.non_manifold_vertices) $(json "$c" mesh.non_manifold_edges) $(json "$c" mesh.triangles)"
-    m2s=$(json "$c" mesh_to_ref_mean_rel)
+    m2s=$(json "$c" mesh_to_ref_plane_mean_rel)
     if [[ $ref == onesided:* ]]; then
       timeout "$TIMEOUT" "$BIN" compare "$mesh" "${ref#onesided:}" --json > "$t" 2> "$t.err" && cham="$(json "$t" mesh_to_ref_mean_rel)(1-sided)"
     elif [[ $ref != - ]]; then

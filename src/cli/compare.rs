@@ -48,6 +48,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         let v = serde_json::json!({
             "chamfer_rel": r.chamfer_rel, "hausdorff_rel": r.hausdorff_rel,
             "mesh_to_ref_mean_rel": r.mesh_to_ref_mean_rel, "ref_to_mesh_mean_rel": r.ref_to_mesh_mean_rel,
+            "mesh_to_ref_plane_mean_rel": r.mesh_to_ref_plane_mean_rel,
             "samples": r.samples, "mesh": mesh_topo, "reference": ref_topo,
         });
         outln!("{}", serde_json::to_string_pretty(&v)?);
@@ -59,6 +60,11 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             r.ref_to_mesh_mean_rel
         );
         outln!("hausdorff_rel {:.3e}", r.hausdorff_rel);
+        if let Some(p) = r.mesh_to_ref_plane_mean_rel {
+            outln!(
+                "mesh→scan surface {p:.3e}  (mean distance to the plane of the 8 nearest points)"
+            );
+        }
         outln!("samples       {}", r.samples);
         outln!(
             "mesh          {} vertices, {} triangles, {} component(s), watertight {}, genus {}",

@@ -90,6 +90,10 @@ pub fn fit_field(
             (Correction::Blocks(blocks), matrix)
         }
     };
+    let far_field = match &carrier {
+        Carrier::Local(l) => Some(l.far_field_switch()),
+        _ => None,
+    };
     let carrier_kind = carrier.kind();
     let carrier_bounds = carrier.zero_set_bounds();
     let field = RbfField {
@@ -104,6 +108,7 @@ pub fn fit_field(
     let residual = residual_at(&field, &points);
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
+        far_field,
         field: Box::new(field),
         method: Method::Csrbf,
         support_radius: support.radius,
@@ -418,13 +423,14 @@ fn fit_oriented_carrier(
     let mut carrier = fit_carrier(points, normals, &params.carrier, radius, index)?;
     let mut flipped = false;
     if let Carrier::Local(local) = &mut carrier {
-        let outer = Aabb::from_points(points).inflated(0.25);
-        let negatives = outer
-            .corners()
-            .iter()
-            .filter(|p| local.value_gradient(p).0 < 0.0)
-            .count();
-        if negatives > 4 {
+        // The winding number's integral decides; for an open sheet (about zero) the tangent planes
+        // seen from the corners of a box around the data vote.
+        let inward = local.points_inward().unwrap_or_else(|| {
+            let outer = Aabb::from_points(points).inflated(0.25);
+            let planes = |p: &Point3| local.nearest_planes(p);
+            outer.corners().iter().filter(|p| planes(p) < 0.0).count() > 4
+        });
+        if inward {
             local.flip_normals();
             flipped = true;
         }

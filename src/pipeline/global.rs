@@ -60,6 +60,7 @@ pub(super) fn fit_global(
     let residual = residual_at(field.as_ref(), &points);
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
+        far_field: None,
         field,
         method: params.method,
         support_radius: 4.0 * support.spacing,

@@ -63,6 +63,9 @@ pub struct FittedField {
     pub noise: crate::rbf::NoiseEstimate,
     /// Smoothing λ used on the diagonal (0 = interpolation).
     pub smoothing: f64,
+    /// Switch of the local carrier's winding-number far field (`None` without one): the surface
+    /// stage turns it off for a surface it trims open, whose sheet the tangent planes continue.
+    pub far_field: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).

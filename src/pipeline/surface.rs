@@ -74,6 +74,10 @@ pub(crate) fn extract_surface(
         resolution,
         ..Default::default()
     };
+    if open && let Some(switch) = &fit.far_field {
+        // An open scan: the tangent planes continue its sheet, which the band and the trim cut.
+        switch.store(false, std::sync::atomic::Ordering::Relaxed);
+    }
     let band;
     let region: &dyn Region = if open {
         band = DataBand::new(&fit.points, fit.support_radius)?;

@@ -10,12 +10,17 @@
 //! - `local`: a partition of unity of the tangent planes of the k nearest oriented points
 //!   (Hoppe et al. 1992 signed distance made continuous; Ohtake et al. 2003 use local quadrics the
 //!   same way). Needs normals; its zero set follows the data, so offsets are small and ears, handles
-//!   and concavities keep the right sign.
+//!   and concavities keep the right sign. Farther than the support radius from every point its sign
+//!   comes from the generalized winding number of the oriented points ([`super::winding`]): `½ − w`,
+//!   blended in between `R` and `2R`, so the carrier has no zero far from the data except where `w`
+//!   crosses ½, i.e. across the holes of a closed object's sampling.
 
 use super::Kernel;
+use super::winding::WindingGrid;
 use crate::geometry::{Aabb, Point3, dist2, dot, norm, normalized, pca::pca, sub};
 use crate::spatial::{KdTree, SpatialIndex};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Which carrier solid to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -215,6 +220,20 @@ fn ellipsoid_local(
     ([u[0] / semi[0], u[1] / semi[1], u[2] / semi[2]], u)
 }
 
+/// Distance from the data, in support radii, where the far field starts to take over.
+const FAR_FROM: f64 = 0.5;
+
+/// The C¹ smoothstep `3u² − 2u³` of `u` clamped to [0, 1], and its derivative.
+fn smoothstep(u: f64) -> (f64, f64) {
+    let v = u.clamp(0.0, 1.0);
+    let d = if u > 0.0 && u < 1.0 {
+        6.0 * v * (1.0 - v)
+    } else {
+        0.0
+    };
+    (v * v * (3.0 - 2.0 * v), d)
+}
+
 /// Fewest points the local carrier blends at any `x` (the far field's vote, see [`LocalCarrier`]).
 pub const FAR_NEIGHBOURS: usize = 16;
 
@@ -249,6 +268,38 @@ pub fn fit_carrier(
                 .ok_or(CarrierError::NeedsNormals)
         }
     }
+}
+
+/// Neighbours per point for its area (`π d_k² / k`).
+const AREA_NEIGHBOURS: usize = 8;
+
+/// The winding grid of the points with usable normals: areas from their [`AREA_NEIGHBOURS`]
+/// nearest neighbours, cells of about `radius` over the points' box grown by `2 radius` and two
+/// cells (beyond it the far field is clamped to the boundary's, about `w = 0`).
+fn winding_grid(
+    points: &[Point3],
+    normals: &[Point3],
+    valid_tree: &KdTree,
+    valid_ids: &[u32],
+    radius: f64,
+) -> Option<Box<WindingGrid>> {
+    use rayon::prelude::*;
+    let vp: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
+    let vn: Vec<Point3> = valid_ids.iter().map(|&i| normals[i as usize]).collect();
+    let areas: Vec<f64> = vp
+        .par_iter()
+        .map_init(Vec::new, |knn, p| {
+            valid_tree.nearest_k(p, AREA_NEIGHBOURS + 1, knn);
+            let m = knn.len().saturating_sub(1).max(1);
+            let d = knn.last().map_or(0.0, |&(_, d)| d);
+            std::f64::consts::PI * d * d / m as f64
+        })
+        .collect();
+    let bbox = Aabb::from_points(&vp);
+    let longest = bbox.extent().iter().fold(0.0f64, |a, &b| a.max(b));
+    let cell = (0.5 * radius).max(longest / super::winding::MAX_CELLS as f64);
+    let domain = bbox.inflated(2.0 * radius + 2.0 * cell);
+    WindingGrid::build(&vp, &vn, &areas, &domain, cell).map(Box::new)
 }
 
 /// Least-squares (Kåsa) sphere; bounding sphere when the fit is degenerate.
@@ -346,6 +397,10 @@ pub struct LocalCarrier {
     index: Arc<dyn SpatialIndex + Send>,
     valid_tree: KdTree,
     valid_ids: Vec<u32>,
+    /// The winding number of the oriented points (the far field's sign).
+    winding: Option<Box<WindingGrid>>,
+    /// Whether the far field is used (see [`LocalCarrier::far_field_switch`]).
+    far_field: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for LocalCarrier {
@@ -378,6 +433,7 @@ impl LocalCarrier {
         }
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
         let valid_tree = KdTree::build(&valid_points).ok()?;
+        let winding = winding_grid(points, &normals, &valid_tree, &valid_ids, radius);
         Some(LocalCarrier {
             points: points.to_vec(),
             normals,
@@ -385,6 +441,8 @@ impl LocalCarrier {
             index,
             valid_tree,
             valid_ids,
+            winding,
+            far_field: Arc::new(AtomicBool::new(true)),
         })
     }
 
@@ -393,6 +451,24 @@ impl LocalCarrier {
         for n in &mut self.normals {
             *n = [-n[0], -n[1], -n[2]];
         }
+        if let Some(w) = &mut self.winding {
+            w.negate();
+        }
+    }
+
+    /// The switch of the winding far field (on when built): off, the carrier is the tangent planes'
+    /// blend everywhere, which continues an open scan's sheet instead of closing it.
+    pub fn far_field_switch(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.far_field)
+    }
+
+    /// Whether the normals point inwards: the winding number integrates to the enclosed volume
+    /// with outward normals, to minus it with inward ones. `None` without a winding grid or when
+    /// the integral is about zero (an open sheet seen from both sides alike).
+    pub fn points_inward(&self) -> Option<bool> {
+        let w = self.winding.as_ref()?;
+        let (sum, abs) = w.sums();
+        (abs > 0.0 && sum.abs() > 0.05 * abs).then_some(sum < 0.0)
     }
 
     /// `(g(x), ∇g(x))`, querying the index.
@@ -405,33 +481,96 @@ impl LocalCarrier {
     /// `(g(x), ∇g(x))` given `candidates`, a superset of the points within `R` of `x`.
     pub fn value_gradient_with(&self, x: &Point3, candidates: &[u32]) -> (f64, Point3) {
         let r2 = self.radius * self.radius;
-        let within = candidates
-            .iter()
-            .filter(|&&j| {
-                let j = j as usize;
-                self.normals[j] != [0.0; 3] && dist2(*x, self.points[j]) < r2
-            })
-            .count();
-        if within >= FAR_NEIGHBOURS {
-            return self.blend(x, candidates, self.radius, None);
+        let (mut within, mut nearest) = (0, (f64::INFINITY, 0usize));
+        for &j in candidates {
+            let j = j as usize;
+            if self.normals[j] == [0.0; 3] {
+                continue;
+            }
+            let d2 = dist2(*x, self.points[j]);
+            if d2 < r2 {
+                within += 1;
+                if d2 < nearest.0 {
+                    nearest = (d2, j);
+                }
+            }
         }
-        // Fewer than K usable points within R: widen the weights to the K nearest ones.
+        let (local, d1, nearest) = if within >= FAR_NEIGHBOURS {
+            let local = self.blend(x, candidates, self.radius, None);
+            (local, nearest.0.sqrt(), nearest.1)
+        } else {
+            // Fewer than K usable points within R: widen the weights to the K nearest ones.
+            let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
+            self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
+            let Some(&(kth, rho)) = knn.last() else {
+                return (0.0, [0.0; 3]);
+            };
+            let ids: Vec<u32> = knn
+                .iter()
+                .map(|&(i, _)| self.valid_ids[i as usize])
+                .collect();
+            let local = if rho <= self.radius {
+                // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
+                self.blend(x, &ids, self.radius, None)
+            } else {
+                let far = self.points[self.valid_ids[kth as usize] as usize];
+                let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
+                self.blend(x, &ids, rho, Some(grad_rho))
+            };
+            (local, knn[0].1, ids[0] as usize)
+        };
+        match &self.winding {
+            Some(w) if d1 > FAR_FROM * self.radius && self.far_field.load(Ordering::Relaxed) => {
+                self.with_far_field(x, local, w, d1, self.points[nearest])
+            }
+            _ => local,
+        }
+    }
+
+    /// The blend of the [`FAR_NEIGHBOURS`] nearest tangent planes at `x` (without the far field).
+    pub fn nearest_planes(&self, x: &Point3) -> f64 {
         let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
         self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
-        let Some(&(kth, rho)) = knn.last() else {
-            return (0.0, [0.0; 3]);
-        };
         let ids: Vec<u32> = knn
             .iter()
             .map(|&(i, _)| self.valid_ids[i as usize])
             .collect();
-        if rho <= self.radius {
-            // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
-            return self.blend(x, &ids, self.radius, None);
-        }
-        let far = self.points[self.valid_ids[kth as usize] as usize];
-        let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
-        self.blend(x, &ids, rho, Some(grad_rho))
+        let rho = knn
+            .last()
+            .map_or(self.radius, |&(_, d)| d.max(self.radius) * 1.0001);
+        self.blend(x, &ids, rho, None).0
+    }
+
+    /// Blend the local value with the winding far field `R (1 − 2w)` (±R far outside / inside):
+    /// `g = (1 − τ) g_local + τ g_far` with `τ = s((d₁ − R/2)/R) · c`, `s` the C¹ smoothstep, `d₁`
+    /// the distance to the nearest point and `c` the far field's confidence: 1 where `w` is
+    /// decisively inside or outside (`|1 − 2w| ≥ 0.6`), 0 where it is undecided
+    /// (`|1 − 2w| ≤ 0.2`: beside an open sheet, across a wide hole), where the tangent planes keep
+    /// deciding as before. The data points themselves (`d₁ = 0`) see only the planes, so the
+    /// offsets and the spline do not change.
+    fn with_far_field(
+        &self,
+        x: &Point3,
+        (gl, dl): (f64, Point3),
+        w: &WindingGrid,
+        d1: f64,
+        nearest: Point3,
+    ) -> (f64, Point3) {
+        let r = self.radius;
+        let (s1, ds1) = smoothstep((d1 - FAR_FROM * r) / r);
+        let (wv, wg) = w.value_gradient(x);
+        let a = 1.0 - 2.0 * wv;
+        let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
+        let dc_dw = dc / 0.4 * -2.0 * a.signum();
+        let gf = r * a;
+        let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
+        let tau = s1 * c;
+        let g = (1.0 - tau) * gl + tau * gf;
+        let grad = [0, 1, 2].map(|k| {
+            let dtau = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
+            (1.0 - tau) * dl[k] - tau * 2.0 * r * wg[k] + (gf - gl) * dtau
+        });
+        (g, grad)
     }
 
     /// `g = Σ w_j n_j·(x − p_j) / Σ w_j` and its gradient over the points `ids` with
@@ -563,9 +702,23 @@ mod tests {
                 semi_axes: [0.4, 0.3, 0.2],
             },
             Carrier::Local(local(&p, &n, 0.08)),
+            // An open cap: beside it the winding number is undecided (the far field's confidence
+            // varies), below its rim the planes hand over to the far field.
+            {
+                let keep: Vec<usize> = (0..p.len()).filter(|&i| p[i][1] > 0.45).collect();
+                let hp: Vec<Point3> = keep.iter().map(|&i| p[i]).collect();
+                let hn: Vec<Point3> = keep.iter().map(|&i| n[i]).collect();
+                Carrier::Local(local(&hp, &hn, 0.08))
+            },
         ];
         for c in &carriers {
-            for x in [[0.71, 0.52, 0.48], [0.2, 0.33, 0.61], [0.5, 0.9, 0.4]] {
+            for x in [
+                [0.71, 0.52, 0.48],
+                [0.2, 0.33, 0.61],
+                [0.5, 0.9, 0.4],
+                [0.5, 0.3, 0.45],
+                [0.93, 0.41, 0.52],
+            ] {
                 let g = c.gradient(&x);
                 let h = 1e-6;
                 for k in 0..3 {

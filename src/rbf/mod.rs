@@ -11,6 +11,7 @@ pub mod levels;
 pub mod noise;
 pub mod pou;
 pub mod support;
+pub mod winding;
 
 pub use assemble::assemble_matrix;
 pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, fit_carrier};
