@@ -1,6 +1,8 @@
 //! Binary glTF 2.0 (GLB): encoder (one buffer; POSITION f32 VEC3 with exact min/max, NORMAL f32
-//! VEC3 unit length, u32 indices; one mesh/node/scene) with a read-back check, and a decoder that
-//! reads POSITION (+ NORMAL) and indices of every triangle primitive from the BIN chunk.
+//! VEC3 unit length, COLOR_0 f32 VEC3 linear RGB when the mesh has colours, u32 indices; one
+//! mesh/node/scene; a far-from-origin mesh stored relative to a node translation; the CRS in
+//! `asset.extras.crs`) with a read-back check, and a decoder that reads POSITION (+ NORMAL,
+//! COLOR_0) and indices of every triangle primitive from the BIN chunk.
 //!
 //! The decoder reads accessors itself with checked arithmetic (no panics on hostile offsets) and
 //! ignores node transforms (meshes are taken in their own frame). Time and memory O(mesh size).
@@ -14,7 +16,7 @@ use std::path::Path;
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 
-use super::{IoError, MEMORY_SOURCE};
+use super::{IoError, MEMORY_SOURCE, MeshMeta};
 use crate::geometry::{Point3, TriMesh, cross, normalized, sub};
 
 const GENERATOR: &str = "rbfsurf";
@@ -54,6 +56,19 @@ pub(crate) fn check_mesh(mesh: &TriMesh, format: &'static str) -> Result<(), IoE
     {
         return Err(err(format!(
             "triangle {t} {tri:?} refers to a vertex ≥ {n}"
+        )));
+    }
+    if !mesh.colors.is_empty() && mesh.colors.len() != n {
+        return Err(err(format!(
+            "{} colours for {n} vertices (must be equal, or no colours)",
+            mesh.colors.len()
+        )));
+    }
+    if let Some(v) = (mesh.colors.iter()).position(|c| c.iter().any(|x| !(0.0..=1.0).contains(x)))
+    {
+        return Err(err(format!(
+            "vertex {v} has a colour outside [0, 1]: {:?}",
+            mesh.colors[v]
         )));
     }
     if let Some(v) = mesh
@@ -152,12 +167,18 @@ fn push_accessor(
 /// ```
 /// use rbfsurf::geometry::TriMesh;
 /// let mesh = TriMesh { vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-///                      normals: vec![], triangles: vec![[0, 1, 2]] };
+///                      normals: vec![], triangles: vec![[0, 1, 2]], colors: vec![] };
 /// let glb = rbfsurf::io::encode_glb(&mesh).unwrap();
 /// assert_eq!(&glb[..4], b"glTF");
 /// assert_eq!(rbfsurf::io::decode_glb(&glb).unwrap().triangles, mesh.triangles);
 /// ```
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    encode_glb_with(mesh, &MeshMeta::default())
+}
+
+/// [`encode_glb`] with metadata: `meta.crs` goes to `asset.extras.crs`. Vertex colours (sRGB in
+/// [`TriMesh::colors`]) are written as `COLOR_0` in linear RGB, as glTF requires.
+pub fn encode_glb_with(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoError> {
     check_mesh(mesh, "GLB")?;
     let origin = origin_for(mesh);
     let shifted = shift(mesh, origin);
@@ -169,19 +190,26 @@ pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
     let mut bin: Vec<u8> = Vec::with_capacity(pos.len() * 24 + mesh.triangles.len() * 12);
     bin.extend(pos.iter().flatten().flat_map(|c| c.to_le_bytes()));
     bin.extend(normals.iter().flatten().flat_map(|c| c.to_le_bytes()));
+    let linear = mesh.colors.iter().flatten().map(|&c| srgb_to_linear(c));
+    bin.extend(linear.flat_map(|c| c.to_le_bytes()));
     let flat = mesh.triangles.iter().flatten();
     bin.extend(flat.flat_map(|i| i.to_le_bytes()));
     let layout = Layout {
         vertices: pos.len(),
         indices: mesh.triangles.len() * 3,
         normals: !normals.is_empty(),
+        colors: !mesh.colors.is_empty(),
         bin_len: bin.len(),
         bounds,
         origin,
     };
-    let out = container(&document(&layout), bin)?;
+    let out = container(&document(&layout), meta, bin)?;
     let back = decode_glb(&out).map_err(|e| enc_err(format!("read-back failed: {e}")))?;
-    if back.vertices.len() != pos.len() || back.triangles.len() != mesh.triangles.len() {
+    let colors_back = back.colors.len() == mesh.colors.len();
+    if back.vertices.len() != pos.len()
+        || back.triangles.len() != mesh.triangles.len()
+        || !colors_back
+    {
         return Err(enc_err(format!(
             "read-back mismatch: wrote {} vertices / {} triangles, read {} / {}",
             pos.len(),
@@ -219,6 +247,8 @@ struct Layout {
     vertices: usize,
     indices: usize,
     normals: bool,
+    /// A COLOR_0 section (f32 VEC3) follows the normals.
+    colors: bool,
     bin_len: usize,
     bounds: Bounds,
     /// Node translation (the positions are stored relative to it), `None` at the origin.
@@ -229,7 +259,7 @@ struct Layout {
 /// extent), its bbox centre rounded to f32 (exactly representable, so `origin + p` loses nothing
 /// but the f32 rounding of the small relative `p`: at x ≈ 6·10⁵ absolute f32 coordinates are
 /// 0.06 apart); `None` otherwise (positions stored as they are).
-fn origin_for(mesh: &TriMesh) -> Option<[f32; 3]> {
+pub(crate) fn origin_for(mesh: &TriMesh) -> Option<[f32; 3]> {
     let b = crate::geometry::Aabb::from_points(&mesh.vertices);
     let (c, e) = (b.center(), b.extent());
     let far = (0..3).any(|k| c[k].abs() > e.iter().fold(0.0f64, |a, &x| a.max(x)));
@@ -247,6 +277,7 @@ fn shift(mesh: &TriMesh, origin: Option<[f32; 3]>) -> Cow<'_, TriMesh> {
                 .collect(),
             normals: mesh.normals.clone(),
             triangles: mesh.triangles.clone(),
+            colors: mesh.colors.clone(),
         }),
     }
 }
@@ -274,7 +305,13 @@ fn document(l: &Layout) -> json::Root {
         let na = push_accessor(&mut root, nv, l.vertices, vec3, None);
         attributes.insert(Valid(json::mesh::Semantic::Normals), na);
     }
-    let off = if l.normals { 2 * span } else { span };
+    let mut off = if l.normals { 2 * span } else { span };
+    if l.colors {
+        let cv = push_view(&mut root, buf, off, span, Target::ArrayBuffer);
+        let ca = push_accessor(&mut root, cv, l.vertices, vec3, None);
+        attributes.insert(Valid(json::mesh::Semantic::Colors(0)), ca);
+        off += span;
+    }
     let iv = push_view(
         &mut root,
         buf,
@@ -314,8 +351,13 @@ fn document(l: &Layout) -> json::Root {
 }
 
 /// GLB container: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
-fn container(root: &json::Root, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
-    let json_bytes = json::serialize::to_vec(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+/// `meta.crs`, when present, is added as `asset.extras.crs` (a string).
+fn container(root: &json::Root, meta: &MeshMeta, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
+    let mut value = json::serialize::to_value(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+    if let (Some(crs), Some(asset)) = (&meta.crs, value.get_mut("asset")) {
+        asset["extras"] = serde_json::json!({ "crs": crs });
+    }
+    let json_bytes = serde_json::to_vec(&value).map_err(|e| enc_err(format!("JSON: {e}")))?;
     let glb = gltf::binary::Glb {
         header: gltf::binary::Header {
             magic: *b"glTF",
@@ -348,6 +390,7 @@ pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoEr
     let blob: &[u8] = gltf.blob.as_deref().unwrap_or_default();
     let mut out = TriMesh::default();
     let mut all_normals = true;
+    let mut all_colors = true;
     for mesh in gltf.document.meshes() {
         let t = (gltf.document.nodes())
             .find(|n| n.mesh().is_some_and(|m| m.index() == mesh.index()))
@@ -379,6 +422,19 @@ pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoEr
                 }
                 _ => all_normals = false,
             }
+            match prim.get(&gltf::Semantic::Colors(0)) {
+                Some(cacc) if all_colors => {
+                    let cs = read_colors(&cacc, blob, src)?;
+                    if cs.len() != count {
+                        return Err(invalid(format!(
+                            "COLOR_0 has {} entries, POSITION {count}",
+                            cs.len()
+                        )));
+                    }
+                    out.colors.extend(cs);
+                }
+                _ => all_colors = false,
+            }
             let idx: Vec<u32> = match prim.indices() {
                 Some(iacc) => read_indices(&iacc, blob, src)?,
                 None => (0..count as u32).collect(),
@@ -401,6 +457,9 @@ pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoEr
     }
     if !all_normals {
         out.normals.clear();
+    }
+    if !all_colors {
+        out.colors.clear();
     }
     Ok(out)
 }
@@ -481,6 +540,68 @@ fn read_vec3(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<Point3
         .collect())
 }
 
+/// COLOR_0 (f32, or normalized u8 / u16; VEC3 or VEC4 with alpha dropped), linear in the file,
+/// returned sRGB-encoded as [`TriMesh::colors`] holds them.
+fn read_colors(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<[f32; 3]>, IoError> {
+    use gltf::accessor::{DataType, Dimensions};
+    let (bytes, stride, _, count) = accessor_span(acc, blob, src)?;
+    let comp = match acc.data_type() {
+        DataType::F32 => 4,
+        DataType::U16 if acc.normalized() => 2,
+        DataType::U8 if acc.normalized() => 1,
+        other => {
+            return Err(IoError::Unsupported {
+                path: src.to_path_buf(),
+                format: "GLB",
+                feature: format!("COLOR_0 of type {other:?} (normalized: {})", acc.normalized()),
+            });
+        }
+    };
+    if !matches!(acc.dimensions(), Dimensions::Vec3 | Dimensions::Vec4) {
+        return Err(IoError::Invalid {
+            path: src.to_path_buf(),
+            format: "GLB",
+            message: "COLOR_0 must be VEC3 or VEC4".into(),
+        });
+    }
+    let value = |o: usize| -> f32 {
+        let b = &bytes[o..o + comp];
+        match comp {
+            4 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            2 => f32::from(u16::from_le_bytes([b[0], b[1]])) / 65535.0,
+            _ => f32::from(b[0]) / 255.0,
+        }
+    };
+    Ok((0..count)
+        .map(|i| [0, 1, 2].map(|k| linear_to_srgb(value(i * stride + k * comp).clamp(0.0, 1.0))))
+        .collect())
+}
+
+/// sRGB transfer function inverse (IEC 61966-2-1): encoded value in [0, 1] → linear light.
+pub(crate) fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// sRGB transfer function: linear light in [0, 1] → encoded value.
+pub(crate) fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The CRS a GLB declares in `asset.extras.crs` (as [`encode_glb_with`] writes it), if any.
+pub fn glb_crs(bytes: &[u8]) -> Option<String> {
+    let glb = gltf::binary::Glb::from_slice(bytes).ok()?;
+    let v: serde_json::Value = serde_json::from_slice(&glb.json).ok()?;
+    Some(v.get("asset")?.get("extras")?.get("crs")?.as_str()?.to_string())
+}
+
 fn read_indices(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<u32>, IoError> {
     use gltf::accessor::{DataType, Dimensions};
     let (bytes, stride, elem, count) = accessor_span(acc, blob, src)?;
@@ -540,6 +661,7 @@ pub(crate) mod tests {
             vertices,
             normals,
             triangles,
+            colors: Vec::new(),
         }
     }
 
