@@ -68,7 +68,9 @@ fn precheck<R: Read + Seek>(r: &mut R, len: u64, src: &Path) -> Result<u64, IoEr
     if xml_offset.checked_add(xml_len).is_none_or(|end| end > len) {
         return Err(invalid(
             src,
-            format!("XML section of {xml_len} bytes at byte {xml_offset} is past the end of the file"),
+            format!(
+                "XML section of {xml_len} bytes at byte {xml_offset} is past the end of the file"
+            ),
         ));
     }
     r.seek(SeekFrom::Start(0)).map_err(read_err)?;
@@ -179,7 +181,13 @@ fn read_scan<R: Read + Seek>(
         out.points.push(xyz);
         if let Some(c) = out.colors.as_mut() {
             let rgb = p.color.map_or([0.5; 3], |c| [c.red, c.green, c.blue]);
-            c.push(rgb.map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.5 }));
+            c.push(rgb.map(|v| {
+                if v.is_finite() {
+                    v.clamp(0.0, 1.0)
+                } else {
+                    0.5
+                }
+            }));
         }
         if let Some(i) = out.intensity.as_mut() {
             let v = p.intensity.filter(|v| v.is_finite()).unwrap_or(0.5);

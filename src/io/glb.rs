@@ -64,8 +64,7 @@ pub(crate) fn check_mesh(mesh: &TriMesh, format: &'static str) -> Result<(), IoE
             mesh.colors.len()
         )));
     }
-    if let Some(v) = (mesh.colors.iter()).position(|c| c.iter().any(|x| !(0.0..=1.0).contains(x)))
-    {
+    if let Some(v) = (mesh.colors.iter()).position(|c| c.iter().any(|x| !(0.0..=1.0).contains(x))) {
         return Err(err(format!(
             "vertex {v} has a colour outside [0, 1]: {:?}",
             mesh.colors[v]
@@ -553,7 +552,10 @@ fn read_colors(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<[f32
             return Err(IoError::Unsupported {
                 path: src.to_path_buf(),
                 format: "GLB",
-                feature: format!("COLOR_0 of type {other:?} (normalized: {})", acc.normalized()),
+                feature: format!(
+                    "COLOR_0 of type {other:?} (normalized: {})",
+                    acc.normalized()
+                ),
             });
         }
     };
@@ -599,7 +601,13 @@ pub(crate) fn linear_to_srgb(c: f32) -> f32 {
 pub fn glb_crs(bytes: &[u8]) -> Option<String> {
     let glb = gltf::binary::Glb::from_slice(bytes).ok()?;
     let v: serde_json::Value = serde_json::from_slice(&glb.json).ok()?;
-    Some(v.get("asset")?.get("extras")?.get("crs")?.as_str()?.to_string())
+    Some(
+        v.get("asset")?
+            .get("extras")?
+            .get("crs")?
+            .as_str()?
+            .to_string(),
+    )
 }
 
 fn read_indices(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<u32>, IoError> {

@@ -57,10 +57,9 @@ struct Checked {
 
 /// Reads the fixed header at the start of `r` and checks it against the file length `len`.
 fn precheck<R: Read + Seek>(r: &mut R, len: u64, src: &Path) -> Result<Checked, IoError> {
-    r.seek(SeekFrom::Start(0))
-        .map_err(|e| read_err(src, e))?;
-    let raw = las::raw::Header::read_from(&mut *r)
-        .map_err(|e| invalid(src, format!("header: {e}")))?;
+    r.seek(SeekFrom::Start(0)).map_err(|e| read_err(src, e))?;
+    let raw =
+        las::raw::Header::read_from(&mut *r).map_err(|e| invalid(src, format!("header: {e}")))?;
     let legacy = u64::from(raw.number_of_point_records);
     let points = match raw.large_file {
         Some(l) if l.number_of_point_records > 0 => l.number_of_point_records,
@@ -93,15 +92,6 @@ fn precheck<R: Read + Seek>(r: &mut R, len: u64, src: &Path) -> Result<Checked, 
     }
     let compressed = raw.point_data_record_format & 0xC0 != 0;
     let record_len = u64::from(raw.point_data_record_length);
-    if !compressed {
-        let need = u128::from(points) * u128::from(record_len) + u128::from(offset_to_points);
-        if need > u128::from(len) {
-            return Err(too_short(
-                format!("header declares {points} points of {record_len} bytes"),
-                u64::try_from(need).unwrap_or(u64::MAX),
-            ));
-        }
-    }
     if let Some(evlr) = raw.evlr.filter(|e| e.number_of_evlrs > 0) {
         check_evlr(r, evlr.start_of_first_evlr, len, src)?;
     }
@@ -113,11 +103,33 @@ fn precheck<R: Read + Seek>(r: &mut R, len: u64, src: &Path) -> Result<Checked, 
     })
 }
 
+/// Uncompressed data: the body the header implies must be in the file (checked after the point
+/// limit, so an absurd count is reported as such).
+fn check_body(c: &Checked, len: u64, src: &Path) -> Result<(), IoError> {
+    let need = u128::from(c.points) * u128::from(c.record_len) + u128::from(c.offset_to_points);
+    if c.compressed || need <= u128::from(len) {
+        return Ok(());
+    }
+    Err(IoError::Truncated {
+        path: src.to_path_buf(),
+        format: FORMAT,
+        what: format!(
+            "header declares {} points of {} bytes",
+            c.points, c.record_len
+        ),
+        expected: u64::try_from(need).unwrap_or(u64::MAX),
+        found: len,
+    })
+}
+
 /// The first EVLR (the one the `las` crate reads whole) must lie inside the file.
 fn check_evlr<R: Read + Seek>(r: &mut R, start: u64, len: u64, src: &Path) -> Result<(), IoError> {
     const EVLR_HEADER: u64 = 60;
     if start.checked_add(EVLR_HEADER).is_none_or(|end| end > len) {
-        return Err(invalid(src, format!("EVLR at byte {start} is past the end")));
+        return Err(invalid(
+            src,
+            format!("EVLR at byte {start} is past the end"),
+        ));
     }
     r.seek(SeekFrom::Start(start + 20))
         .map_err(|e| read_err(src, e))?;
@@ -214,6 +226,7 @@ pub(crate) fn read_las_points<R: Read + Seek + Send + Sync>(
         buffers: CHUNK_POINTS as u64 * c.record_len.max(20) + (64 << 10),
     };
     check_memory(c.points, cost, CountSource::Declared, limits, src)?;
+    check_body(&c, len, src)?;
     if c.points == 0 {
         return Err(IoError::Empty {
             path: src.to_path_buf(),
@@ -234,8 +247,8 @@ pub(crate) fn read_las_points<R: Read + Seek + Send + Sync>(
         check_chunk_table(&mut r, &c, &vlr, len, src)?;
         r.seek(SeekFrom::Start(c.offset_to_points))
             .map_err(|e| read_err(src, e))?;
-        let mut dec = laz::LasZipDecompressor::new(r, vlr)
-            .map_err(|e| invalid(src, format!("LAZ: {e}")))?;
+        let mut dec =
+            laz::LasZipDecompressor::new(r, vlr).map_err(|e| invalid(src, format!("LAZ: {e}")))?;
         stream(&header, c.points, &mut out, src, |buf| {
             dec.decompress_many(buf)
         })?;
@@ -325,13 +338,16 @@ impl Columns {
     fn finish(self, crs: Option<String>) -> PointCloud {
         let colors = self.rgb.and_then(|rgb| {
             let max = rgb.iter().flatten().copied().max().unwrap_or(0);
-            let s = unit_scale(max)?;
-            Some(rgb.iter().map(|c| c.map(|v| f32::from(v) * s)).collect())
+            let full = color_full_scale(max)?;
+            Some(rgb.iter().map(|c| c.map(|v| f32::from(v) / full)).collect())
         });
         let max = self.intensity.iter().copied().max().unwrap_or(0);
         let intensity = (max > 0).then(|| {
-            let s = 1.0 / f32::from(max);
-            self.intensity.iter().map(|&v| f32::from(v) * s).collect()
+            let full = f32::from(max);
+            self.intensity
+                .iter()
+                .map(|&v| f32::from(v) / full)
+                .collect()
         });
         PointCloud {
             points: self.points,
@@ -343,14 +359,14 @@ impl Columns {
     }
 }
 
-/// Scale to [0, 1] for a colour column whose largest value is `max`: 16-bit colour as the LAS
-/// specification asks (÷ 65535), but many writers store 8-bit values in the 16-bit fields, so a
-/// column that never exceeds 255 is read as 8-bit (÷ 255). `None` when all values are 0.
-pub(crate) fn unit_scale(max: u16) -> Option<f32> {
+/// Full-scale value of a colour column whose largest value is `max`: 16-bit colour as the LAS
+/// specification asks (65535), but many writers store 8-bit values in the 16-bit fields, so a
+/// column that never exceeds 255 is read as 8-bit (255). `None` when all values are 0.
+fn color_full_scale(max: u16) -> Option<f32> {
     match max {
         0 => None,
-        1..=255 => Some(1.0 / 255.0),
-        _ => Some(1.0 / 65535.0),
+        1..=255 => Some(255.0),
+        _ => Some(65535.0),
     }
 }
 

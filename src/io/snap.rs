@@ -144,16 +144,27 @@ mod tests {
         // The PLY writer merges the same way near the origin (f32 coordinates); far from it, it
         // writes f64 coordinates and keeps both apexes.
         for (shift, head) in [
-            (0.0, "property float x\nproperty float y\nproperty float z\nelement face 6"),
-            (b, "property double x\nproperty double y\nproperty double z\nelement face 8"),
+            (
+                0.0,
+                "property float x\nproperty float y\nproperty float z\nelement face 6",
+            ),
+            (
+                b,
+                "property double x\nproperty double y\nproperty double z\nelement face 8",
+            ),
         ] {
             let mut m = mesh.clone();
-            m.vertices.iter_mut().for_each(|p| *p = p.map(|c| c - b + shift));
+            m.vertices
+                .iter_mut()
+                .for_each(|p| *p = p.map(|c| c - b + shift));
             let ply = crate::io::write::encode_ply(&m, &Default::default()).unwrap();
             let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
             let header = String::from_utf8_lossy(&ply[..text_end]);
             let vertices = if shift == 0.0 { 5 } else { 6 };
-            assert!(header.contains(&format!("element vertex {vertices}")), "{header}");
+            assert!(
+                header.contains(&format!("element vertex {vertices}")),
+                "{header}"
+            );
             assert!(header.contains(head), "{header}");
         }
         // Nothing to merge: borrowed as is.

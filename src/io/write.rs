@@ -315,7 +315,8 @@ mod tests {
         assert!(text.contains(
             "property float nz\nelement face 8\nproperty list uchar int vertex_indices\n"
         ));
-        let obj = String::from_utf8(encode_obj(&octahedron(), &MeshMeta::default()).unwrap()).unwrap();
+        let obj =
+            String::from_utf8(encode_obj(&octahedron(), &MeshMeta::default()).unwrap()).unwrap();
         assert!(obj.starts_with("# rbfsurf mesh: 6 vertices, 8 triangles\nv 1.5 0 0\n"));
         assert!(obj.contains("\nf 1//1 3//3 5//5\n"));
     }

@@ -137,7 +137,9 @@ mod tests {
         assert_eq!(weight(1.0, 1.0), 0.0);
         assert_eq!(weight(4.0, 1.0), 0.0);
         // Decreasing inside the support.
-        let w: Vec<f64> = (0..10).map(|k| weight((k as f64 / 10.0).powi(2), 1.0)).collect();
+        let w: Vec<f64> = (0..10)
+            .map(|k| weight((k as f64 / 10.0).powi(2), 1.0))
+            .collect();
         assert!(w.windows(2).all(|p| p[1] < p[0]), "{w:?}");
     }
 
@@ -171,7 +173,10 @@ mod tests {
         let vals = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
         let c = vertex_colors(&[[0.4, 0.0, 0.0]], &pts, &vals, 2.0).unwrap()[0];
         assert!(c[0] > 0.5 && c[2] > 0.1 && c[0] + c[2] > 0.999, "{c:?}");
-        assert_eq!("intensity".parse::<ColorMode>().unwrap(), ColorMode::Intensity);
+        assert_eq!(
+            "intensity".parse::<ColorMode>().unwrap(),
+            ColorMode::Intensity
+        );
         assert!("gray".parse::<ColorMode>().is_err());
     }
 }

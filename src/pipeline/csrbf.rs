@@ -121,7 +121,7 @@ pub fn fit_field(
         normals_reoriented,
         noise,
         smoothing: params.smoothing.lambda(),
-           color_mode: point_colors.as_ref().map(|_| params.color),
+        color_mode: point_colors.as_ref().map(|_| params.color),
         point_colors,
     })
 }

@@ -77,7 +77,7 @@ pub(super) fn fit_global(
         normals_reoriented: 0,
         noise: Default::default(),
         smoothing: 0.0,
-           color_mode: point_colors.as_ref().map(|_| params.color),
+        color_mode: point_colors.as_ref().map(|_| params.color),
         point_colors,
     })
 }

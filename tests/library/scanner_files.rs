@@ -186,10 +186,7 @@ pub fn e57_bytes(scan: &Scan, scans: usize, coords: E57Coords, crs: Option<&str>
     let mut w = e57::E57Writer::from_file(&path, "rbfsurf-test-file").unwrap();
     w.set_coordinate_metadata(crs.map(str::to_string));
     let n = scan.points.len();
-    let u16_type = RecordDataType::Integer {
-        min: 0,
-        max: 65535,
-    };
+    let u16_type = RecordDataType::Integer { min: 0, max: 65535 };
     let xyz = match coords {
         E57Coords::Cartesian => [
             Record::CARTESIAN_X_F64,
@@ -210,7 +207,11 @@ pub fn e57_bytes(scan: &Scan, scans: usize, coords: E57Coords, crs: Option<&str>
         let range = s * n / scans..(s + 1) * n / scans;
         let axis = [0.6, 0.0, 0.8];
         let q = quaternion(axis, 0.3 + s as f64);
-        let t = [scan.offset[0] + 10.0 * s as f64, scan.offset[1] - 3.0, scan.offset[2] + 1.5];
+        let t = [
+            scan.offset[0] + 10.0 * s as f64,
+            scan.offset[1] - 3.0,
+            scan.offset[2] + 1.5,
+        ];
         let r = rotation(q);
         let mut protos = xyz.to_vec();
         protos.extend([

@@ -110,7 +110,12 @@ async fn las_laz_and_e57_uploads_give_coloured_georeferenced_meshes() {
     ] {
         let uri = format!("/v1/reconstructions?{SMALL}&wait=60");
         let a = post(&s.app, &uri, ctype, body).await;
-        assert_eq!(a.status, StatusCode::OK, "{name}: {}", String::from_utf8_lossy(&a.body));
+        assert_eq!(
+            a.status,
+            StatusCode::OK,
+            "{name}: {}",
+            String::from_utf8_lossy(&a.body)
+        );
         let job = a.json();
         assert_eq!(job["status"], "succeeded", "{name}: {job}");
         assert_eq!(job["input"]["points"], 1500, "{name}");
@@ -121,7 +126,10 @@ async fn las_laz_and_e57_uploads_give_coloured_georeferenced_meshes() {
         let glb = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.glb")).await;
         let mesh = rbfsurf::io::decode_glb(&glb.body).unwrap();
         assert_eq!(mesh.colors.len(), mesh.vertices.len(), "{name}");
-        assert_eq!(rbfsurf::io::glb_crs(&glb.body).as_deref(), Some("EPSG:32633"));
+        assert_eq!(
+            rbfsurf::io::glb_crs(&glb.body).as_deref(),
+            Some("EPSG:32633")
+        );
         // Vertices at UTM coordinates, within centimetres of the sphere.
         let worst = (mesh.vertices.iter())
             .map(|v| (shape.signed_distance(v)).abs())
@@ -129,7 +137,11 @@ async fn las_laz_and_e57_uploads_give_coloured_georeferenced_meshes() {
         assert!(worst < 0.5, "{name}: {worst} m off the sphere");
         let ply = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.ply")).await;
         let head = String::from_utf8_lossy(&ply.body[..600]).into_owned();
-        for needle in ["comment crs EPSG:32633", "property double x", "property uchar red"] {
+        for needle in [
+            "comment crs EPSG:32633",
+            "property double x",
+            "property uchar red",
+        ] {
             assert!(head.contains(needle), "{name}: {needle}: {head}");
         }
     }
