@@ -89,7 +89,7 @@ def pye57_file(path, xyz, rgb16, intensity):
     back = pye57.E57(path)
     rows = []
     for k in range(back.scan_count):
-        s = back.read_scan(k, intensity=True, colors=True, transform=True)
+        s = back.read_scan(k, intensity=True, colors=True, transform=True, ignore_missing_fields=True)
         rows.append((np.stack([s["cartesianX"], s["cartesianY"], s["cartesianZ"]], axis=1),
                      np.stack([s["colorRed"], s["colorGreen"], s["colorBlue"]], axis=1),
                      s["intensity"]))
@@ -106,13 +106,13 @@ def read_csv(path):
 
 def verify_ours(d):
     for name in sorted(os.listdir(d)):
-        if not name.startswith("ours_") or name.endswith(".csv"):
+        if not name.startswith("ours") or name.endswith(".csv"):
             continue
         path = os.path.join(d, name)
         xyz, rgb, intensity = read_csv(path + ".csv")
         if name.endswith(".e57"):
             f = pye57.E57(path)
-            parts = [f.read_scan(k, intensity=True, colors=True, transform=True)
+            parts = [f.read_scan(k, intensity=True, colors=True, transform=True, ignore_missing_fields=True)
                      for k in range(f.scan_count)]
             got = np.concatenate([np.stack([s["cartesianX"], s["cartesianY"], s["cartesianZ"]], 1)
                                   for s in parts])
