@@ -11,3 +11,4 @@ mod pipeline;
 mod run;
 mod scanner_files;
 mod scanners;
+mod scanners_independent;

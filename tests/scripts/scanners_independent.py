@@ -7,7 +7,7 @@ Run from the repository root:  python3 tests/scripts/scanners_independent.py
 1. laspy (with the lazrs backend) writes LAS 1.2 point format 3, LAS 1.4 format 7 and a LAZ 1.4
    format 8 file at UTM coordinates with 16-bit colour, and pye57 (libE57Format) writes a
    two-scan E57 with poses and 8-bit colour; each gets a CSV of the values it holds.
-2. `cargo test --test library scanners::independent_files -- --ignored` reads those files with
+2. `cargo test --test library scanners_independent::independent_files -- --ignored` reads those files with
    rbfsurf and compares against the CSVs (coordinates bit-exact, colours and intensity to 1e-6),
    then writes rbfsurf's own test files (las and e57 crates) with their CSVs.
 3. laspy and pye57 read rbfsurf's files and compare against those CSVs.
@@ -144,7 +144,7 @@ def main():
     pye57_file(os.path.join(d, "theirs.e57"), xyz, rgb, intensity)
     env = dict(os.environ, RBFSURF_INDEPENDENT_DIR=d)
     r = subprocess.run(["cargo", "test", "--locked", "--test", "library",
-                        "scanners::independent_files", "--", "--ignored", "--nocapture"], env=env)
+                        "scanners_independent::independent_files", "--", "--ignored", "--nocapture"], env=env)
     check("rbfsurf reads the laspy and pye57 files", r.returncode == 0)
     verify_ours(d)
     print("files in", d)
