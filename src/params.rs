@@ -165,6 +165,9 @@ pub struct ReconParams {
     /// Default 0.01; 0 keeps every component. Two separate objects each carry their own points and
     /// both stay.
     pub min_support: f64,
+    /// Vertex colours from the points' attributes (default `rgb`: the points' RGB when the input
+    /// has it, else none).
+    pub color: crate::mesh::ColorMode,
 }
 
 impl Default for ReconParams {
@@ -189,6 +192,7 @@ impl Default for ReconParams {
             blocks: crate::rbf::Blocks::Auto,
             min_component: 0.0,
             min_support: 0.01,
+            color: crate::mesh::ColorMode::Rgb,
         }
     }
 }
@@ -412,6 +416,11 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub min_support: Option<f64>,
+    /// Vertex colours: rgb (default: the points' RGB, 8 or 16 bit, when the input has it — LAS/LAZ, E57 — else none), intensity (the points' intensity as grey), none. A smooth distance-weighted blend of the points within the support radius; written as COLOR_0 in GLB and red green blue in PLY.
+    #[cfg_attr(feature = "cli", arg(long))]
+    #[serde(default, with = "from_str_opt")]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
+    pub color: Option<crate::mesh::ColorMode>,
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -450,6 +459,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             blocks: a.blocks.unwrap_or(d.blocks),
             min_component: a.min_component.unwrap_or(d.min_component),
             min_support: a.min_support.unwrap_or(d.min_support),
+            color: a.color.unwrap_or(d.color),
         };
         p.validate()?;
         Ok(p)

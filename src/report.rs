@@ -23,6 +23,26 @@ pub struct Report {
     pub memory: MemoryReport,
     /// Polygonization statistics (sparse grid).
     pub polygonize: PolygonizeReport,
+    /// Vertex colours and georeference carried from the input.
+    pub attributes: AttributesReport,
+}
+
+/// What the input carried besides positions and normals, and what the mesh got from it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct AttributesReport {
+    /// Whether the input points had RGB colour.
+    pub input_rgb: bool,
+    /// Whether the input points had intensity.
+    pub input_intensity: bool,
+    /// Where the vertex colours come from: `rgb`, `intensity` or `none` (the `--color` mode, or
+    /// `none` when the input lacks that attribute).
+    pub color: &'static str,
+    /// Coloured mesh vertices (0 without colour).
+    pub colored_vertices: usize,
+    /// The input's coordinate reference system, verbatim (LAS WKT or `EPSG:<code>` from GeoTIFF
+    /// keys, E57 coordinate metadata); `null` when it declares none. Also written to GLB
+    /// `asset.extras.crs` and a PLY `comment crs` line.
+    pub crs: Option<String>,
 }
 
 /// Resolved parameters.

@@ -164,7 +164,18 @@ pub fn clean_cloud(
         outliers_removed: 0,
     };
     check_degenerate(&points, normals.is_some())?;
-    Ok((PointCloud { points, normals }, stats))
+    // Colours and intensity follow the kept points (a merged duplicate keeps the first's).
+    let source: Vec<usize> = kept.iter().map(|&k| finite[k]).collect();
+    let (colors, intensity) = cloud.attributes_at(&source);
+    let crs = cloud.crs.clone();
+    let kept_cloud = PointCloud {
+        points,
+        normals,
+        colors,
+        intensity,
+        crs,
+    };
+    Ok((kept_cloud, stats))
 }
 
 /// Refuse clouds with fewer than 4 points, collinear clouds, and coplanar clouds without normals.
@@ -192,6 +203,7 @@ mod tests {
         PointCloud {
             points,
             normals: None,
+            ..Default::default()
         }
     }
 
@@ -246,6 +258,7 @@ mod tests {
         let with_normals = PointCloud {
             normals: Some(vec![[0.0, 0.0, 1.0]; 100]),
             points: plane,
+            ..Default::default()
         };
         assert!(clean_cloud(&with_normals, &CleanParams::default()).is_ok());
     }
@@ -268,6 +281,7 @@ mod tests {
             &PointCloud {
                 points: p,
                 normals: Some(n),
+                ..Default::default()
             },
             &CleanParams::default(),
         )

@@ -49,14 +49,7 @@ pub fn remove_outliers(cloud: &PointCloud, params: &OutlierParams) -> (PointClou
     let mad = median_of(mean_dist.iter().map(|d| (d - median).abs()).collect());
     let limit = median + params.std_ratio * 1.4826 * mad.max(1e-12 * median);
     let keep: Vec<usize> = (0..n).filter(|&i| mean_dist[i] <= limit).collect();
-    let out = PointCloud {
-        points: keep.iter().map(|&i| cloud.points[i]).collect(),
-        normals: cloud
-            .normals
-            .as_ref()
-            .map(|nr| keep.iter().map(|&i| nr[i]).collect()),
-    };
-    (out, n - keep.len())
+    (cloud.select(&keep), n - keep.len())
 }
 
 fn median_of(mut v: Vec<f64>) -> f64 {

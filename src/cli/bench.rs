@@ -84,6 +84,7 @@ fn random_subset(cloud: &PointCloud, n: usize, seed: u64) -> PointCloud {
     PointCloud {
         points: idx.iter().map(|&i| cloud.points[i]).collect(),
         normals: None,
+        ..Default::default()
     }
 }
 

@@ -47,7 +47,16 @@ fn media_type(path: &std::path::Path) -> &'static str {
         Some(PointFormat::Csv) => "text/csv",
         Some(PointFormat::Obj) => "model/obj",
         Some(PointFormat::Xyz | PointFormat::Pts) => "text/plain",
-        None => "application/octet-stream",
+        Some(PointFormat::Las)
+            if path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("laz")) =>
+        {
+            "application/vnd.laszip"
+        }
+        Some(PointFormat::Las) => "application/vnd.las",
+        // E57 has no registered media type; the server recognises its signature.
+        Some(PointFormat::E57) | None => "application/octet-stream",
     }
 }
 

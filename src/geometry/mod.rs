@@ -22,6 +22,44 @@ pub struct PointCloud {
     pub points: Vec<Point3>,
     /// Per-point normals (same length as `points`), not necessarily unit length, when the source had them.
     pub normals: Option<Vec<Point3>>,
+    /// Per-point colour (same length as `points`): red, green, blue in [0, 1] as the source stores
+    /// them (sRGB-encoded, the scanners' convention; 8- and 16-bit sources both scaled to [0, 1]).
+    pub colors: Option<Vec<[f32; 3]>>,
+    /// Per-point return intensity (same length as `points`) in [0, 1] (see docs/formats.md for
+    /// each format's scaling).
+    pub intensity: Option<Vec<f32>>,
+    /// Coordinate reference system the source declares, verbatim: OGC WKT, `EPSG:<code>` from
+    /// GeoTIFF keys, or an E57 `coordinateMetadata` string. Never interpreted, only passed on.
+    pub crs: Option<String>,
+}
+
+impl PointCloud {
+    /// The cloud restricted to the points at `keep` (in that order), with every per-point
+    /// attribute (normals, colours, intensity) selected alike and the CRS kept.
+    /// Panics if an index is out of range.
+    pub fn select(&self, keep: &[usize]) -> PointCloud {
+        let (colors, intensity) = self.attributes_at(keep);
+        PointCloud {
+            points: keep.iter().map(|&i| self.points[i]).collect(),
+            normals: (self.normals.as_ref()).map(|v| keep.iter().map(|&i| v[i]).collect()),
+            colors,
+            intensity,
+            crs: self.crs.clone(),
+        }
+    }
+
+    /// Colours and intensity of the points at `keep`; an attribute whose length differs from the
+    /// point count is dropped (`None`). Panics if an index is out of range.
+    pub fn attributes_at(&self, keep: &[usize]) -> (Option<Vec<[f32; 3]>>, Option<Vec<f32>>) {
+        let n = self.points.len();
+        let colors = (self.colors.as_ref())
+            .filter(|v| v.len() == n)
+            .map(|v| keep.iter().map(|&i| v[i]).collect());
+        let intensity = (self.intensity.as_ref())
+            .filter(|v| v.len() == n)
+            .map(|v| keep.iter().map(|&i| v[i]).collect());
+        (colors, intensity)
+    }
 }
 
 /// An indexed triangle mesh.
@@ -33,6 +71,9 @@ pub struct TriMesh {
     pub normals: Vec<Point3>,
     /// Triangles as vertex indices, counter-clockwise seen from outside (right-hand rule gives the outward normal).
     pub triangles: Vec<[u32; 3]>,
+    /// Per-vertex colour (same length as `vertices`), red, green, blue in [0, 1] in the input's
+    /// encoding (sRGB for scanner RGB), or empty when the mesh has none.
+    pub colors: Vec<[f32; 3]>,
 }
 
 // Vector helpers, generic over the dimension (3D here, 2D in the curve workbench); by value,

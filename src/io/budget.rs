@@ -81,6 +81,46 @@ pub(crate) fn check_reader_memory(
     })
 }
 
+/// Per-point bytes and fixed buffers of a reader, for [`check_memory`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct ReaderCost {
+    /// Bytes kept per point: 24 for the f64 coordinates, plus 12 for f32 RGB, 4 for f32
+    /// intensity, 24 for f64 normals, whichever the file has.
+    pub(crate) per_point: u64,
+    /// Fixed buffers while reading (one chunk of records, decoder state), bytes.
+    pub(crate) buffers: u64,
+}
+
+impl ReaderCost {
+    /// Peak MiB for `points` points.
+    pub(crate) fn mib(self, points: u64) -> f64 {
+        (points as f64 * self.per_point as f64 + self.buffers as f64) / MIB
+    }
+}
+
+/// `OverMemory` when `points` points at `cost` exceed `limits.max_memory_mib`: the scanner
+/// readers' form of [`check_reader_memory`] (their points carry colour and intensity too).
+pub(crate) fn check_memory(
+    points: u64,
+    cost: ReaderCost,
+    counted: CountSource,
+    limits: &ReadLimits,
+    src: &Path,
+) -> Result<(), IoError> {
+    let budget = limits.max_memory_mib.saturating_mul(1 << 20);
+    let need = u128::from(points) * u128::from(cost.per_point.max(1)) + u128::from(cost.buffers);
+    if need <= u128::from(budget) {
+        return Ok(());
+    }
+    Err(IoError::OverMemory {
+        path: src.to_path_buf(),
+        points,
+        counted: counted.label(),
+        needed_mib: cost.mib(points),
+        budget_mib: limits.max_memory_mib,
+    })
+}
+
 /// A point count known before reading a file (see [`peek_point_count`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PointCountHint {
@@ -126,6 +166,18 @@ pub fn peek_point_count(path: &Path) -> Result<PointCountHint, IoError> {
         source,
     })?;
     let format = detect_point_format(path, head)?;
+    if matches!(format, PointFormat::Las | PointFormat::E57) {
+        let (points, has_normals) = if format == PointFormat::Las {
+            (super::las::peek_points(&mut r, len, path)?, false)
+        } else {
+            (super::e57::peek_points(&mut r, len, path)?, false)
+        };
+        return Ok(PointCountHint {
+            points,
+            exact: true,
+            has_normals: Some(has_normals),
+        });
+    }
     if format == PointFormat::Ply {
         let (points, normals) = super::ply::peek_vertices(r, path)?;
         return Ok(PointCountHint {

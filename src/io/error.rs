@@ -35,7 +35,7 @@ pub enum IoError {
         what: String,
     },
     /// The format could not be determined from the extension or the content.
-    #[error("{}: unknown format ({detail}); supported point formats: .ply .xyz .pts .csv .txt .obj, mesh formats: .ply .obj .off .glb", path.display())]
+    #[error("{}: unknown format ({detail}); supported point formats: .ply .xyz .pts .csv .txt .obj .las .laz .e57, mesh formats: .ply .obj .off .glb", path.display())]
     UnknownFormat {
         /// File (or `<input>`).
         path: PathBuf,

@@ -1,5 +1,5 @@
-//! Stage `io`: point-cloud readers (PLY, XYZ/PTS/CSV text, OBJ vertices) and mesh readers/writers
-//! (OFF, PLY, OBJ, GLB = binary glTF 2.0).
+//! Stage `io`: point-cloud readers (PLY, XYZ/PTS/CSV text, OBJ vertices, LAS/LAZ, E57) and mesh
+//! readers/writers (OFF, PLY, OBJ, GLB = binary glTF 2.0).
 //!
 //! Readers do not clean: non-finite coordinates are passed through for the `clean` stage to drop and
 //! count. Every reader is linear in the file size, bounded by [`ReadLimits`] (checked before any
@@ -12,8 +12,10 @@
 //! Wavefront OBJ and Geomview OFF format descriptions.
 
 mod budget;
+mod e57;
 mod error;
 mod glb;
+mod las;
 mod obj;
 mod off;
 mod ply;
@@ -29,8 +31,8 @@ use std::path::Path;
 
 pub use budget::{PointCountHint, peek_point_count, reader_peak_mib};
 pub use error::IoError;
-pub use glb::{decode_glb, encode_glb};
-pub use write::{write_atomic, write_mesh, write_points_ply};
+pub use glb::{decode_glb, encode_glb, encode_glb_with, glb_crs};
+pub use write::{write_atomic, write_mesh, write_mesh_with, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};
 
@@ -47,6 +49,10 @@ pub enum PointFormat {
     Csv,
     /// Wavefront OBJ: the `v` (and matching `vn`) lines.
     Obj,
+    /// ASPRS LAS 1.0–1.4, uncompressed or LAZ (LASzip) compressed, any point format 0–10.
+    Las,
+    /// ASTM E2807 E57: every scan of the file, each moved by its pose.
+    E57,
 }
 
 impl PointFormat {
@@ -60,15 +66,21 @@ impl PointFormat {
             "pts" => Some(PointFormat::Pts),
             "csv" => Some(PointFormat::Csv),
             "obj" => Some(PointFormat::Obj),
+            "las" | "laz" => Some(PointFormat::Las),
+            "e57" => Some(PointFormat::E57),
             _ => None,
         }
     }
 
-    /// Format recognised from the first bytes: `ply` magic → PLY; text whose first data line starts
-    /// with `v ` → OBJ; other text → XYZ (the text reader also handles CSV and PTS). Binary → `None`.
+    /// Format recognised from the first bytes: `ply` magic → PLY; `LASF` → LAS/LAZ; `ASTM-E57` →
+    /// E57; text whose first data line starts with `v ` → OBJ; other text → XYZ (the text reader
+    /// also handles CSV and PTS). Other binary → `None`.
     pub fn sniff(bytes: &[u8]) -> Option<PointFormat> {
         if is_ply_magic(bytes) {
             return Some(PointFormat::Ply);
+        }
+        if let Some(f) = binary_magic(bytes) {
+            return Some(f);
         }
         if !looks_like_text(bytes) {
             return None;
@@ -93,6 +105,8 @@ impl PointFormat {
             PointFormat::Pts => "PTS",
             PointFormat::Csv => "CSV",
             PointFormat::Obj => "OBJ",
+            PointFormat::Las => "LAS",
+            PointFormat::E57 => "E57",
         }
     }
 }
@@ -128,6 +142,14 @@ impl MeshFormat {
             }),
         }
     }
+}
+
+/// What a written mesh records besides its geometry and colours.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MeshMeta {
+    /// Coordinate reference system of the vertices, passed on verbatim from the input (see
+    /// [`crate::geometry::PointCloud::crs`]).
+    pub crs: Option<String>,
 }
 
 /// Resource limits for readers; checked before allocating anything proportional to a declared size.
@@ -188,6 +210,17 @@ pub fn read_point_cloud(path: &Path, limits: &ReadLimits) -> Result<PointCloud, 
         PointFormat::Xyz | PointFormat::Pts | PointFormat::Csv => {
             text::read_text_points(r, len, format, limits, path)?
         }
+        PointFormat::Las | PointFormat::E57 => {
+            // These readers seek (header, chunk table, binary sections): a fresh buffered file.
+            drop(r);
+            let (file, _) = open_limited(path, limits.max_bytes)?;
+            let seekable = BufReader::with_capacity(budget::READ_BUFFER_BYTES, file);
+            if format == PointFormat::Las {
+                las::read_las_points(seekable, len, limits, path)?
+            } else {
+                e57::read_e57_points(seekable, len, limits, path)?
+            }
+        }
         PointFormat::Obj => {
             let mut bytes = Vec::with_capacity(len as usize);
             r.read_to_end(&mut bytes).map_err(|source| IoError::Read {
@@ -242,6 +275,8 @@ fn parse_point_cloud_named(
             text::read_text_points(bytes, len, format, limits, src)?
         }
         PointFormat::Obj => obj::read_obj_points(bytes, limits, src)?,
+        PointFormat::Las => las::read_las_points(std::io::Cursor::new(bytes), len, limits, src)?,
+        PointFormat::E57 => e57::read_e57_points(std::io::Cursor::new(bytes), len, limits, src)?,
     };
     non_empty(pc, format, src)
 }
@@ -349,10 +384,13 @@ fn read_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, IoError> {
     Ok(bytes)
 }
 
-/// Point format of a file: PLY magic wins, then the extension, then text sniffing.
+/// Point format of a file: PLY, LAS or E57 magic wins, then the extension, then text sniffing.
 fn detect_point_format(path: &Path, bytes: &[u8]) -> Result<PointFormat, IoError> {
     if is_ply_magic(bytes) {
         return Ok(PointFormat::Ply);
+    }
+    if let Some(f) = binary_magic(bytes) {
+        return Ok(f);
     }
     if let Some(f) = PointFormat::from_path(path) {
         return Ok(f);
@@ -361,6 +399,17 @@ fn detect_point_format(path: &Path, bytes: &[u8]) -> Result<PointFormat, IoError
         path: path.to_path_buf(),
         detail: "unknown extension and the content is binary, not text".into(),
     })
+}
+
+/// LAS/LAZ (`LASF`) or E57 (`ASTM-E57`) by their file signatures.
+fn binary_magic(bytes: &[u8]) -> Option<PointFormat> {
+    if bytes.starts_with(las::MAGIC) {
+        Some(PointFormat::Las)
+    } else if bytes.starts_with(e57::MAGIC) {
+        Some(PointFormat::E57)
+    } else {
+        None
+    }
 }
 
 /// `ply` followed by a line end.

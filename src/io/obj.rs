@@ -37,6 +37,7 @@ pub(crate) fn read_obj_points(
     Ok(PointCloud {
         points: d.v,
         normals,
+        ..Default::default()
     })
 }
 
@@ -73,6 +74,7 @@ pub(crate) fn read_obj_mesh(
         vertices: d.v,
         normals,
         triangles: d.tris,
+        colors: Vec::new(),
     })
 }
 

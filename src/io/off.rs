@@ -120,6 +120,7 @@ pub(crate) fn read_off(bytes: &[u8], limits: &ReadLimits, src: &Path) -> Result<
         vertices: Vec::with_capacity(cap),
         normals: Vec::with_capacity(if has_normals { cap } else { 0 }),
         triangles: Vec::new(),
+        colors: Vec::new(),
     };
     let want = if has_normals { 6 } else { 3 };
     for k in 0..nv {

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use crate::geometry::TriMesh;
 
 /// `mesh` with every group of vertices whose coordinates are equal after rounding to f32 merged into
-/// the group's first vertex (position rounded to f32, that vertex's normal), triangles remapped and
+/// the group's first vertex (position rounded to f32, that vertex's normal and colour), triangles remapped and
 /// those with a repeated corner dropped, vertices renumbered in first-use order of the original
 /// indices. Borrowed unchanged when no two vertices round to the same position. Non-finite f32
 /// coordinates are left for the caller's checks (they are never merged).
@@ -44,6 +44,8 @@ pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
             kept as usize
         }
     ];
+    let has_colors = mesh.colors.len() == mesh.vertices.len();
+    let mut colors = vec![[0.0f32; 3]; if has_colors { kept as usize } else { 0 }];
     let mut seen = vec![false; kept as usize];
     for (v, &id) in to.iter().enumerate() {
         if !seen[id as usize] {
@@ -51,6 +53,9 @@ pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
             vertices[id as usize] = mesh.vertices[v].map(|c| f64::from(c as f32));
             if let Some(n) = mesh.normals.get(v).filter(|_| !normals.is_empty()) {
                 normals[id as usize] = *n;
+            }
+            if has_colors {
+                colors[id as usize] = mesh.colors[v];
             }
         }
     }
@@ -66,6 +71,7 @@ pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
         vertices,
         normals,
         triangles,
+        colors,
     })
 }
 
@@ -99,6 +105,7 @@ mod tests {
                 [3, 4, 5],
                 [3, 0, 4],
             ],
+            colors: Vec::new(),
         };
         let merged = merge_f32_duplicates(&mesh);
         assert_eq!(merged.vertices.len(), 5);
@@ -128,21 +135,44 @@ mod tests {
                 triangles: (back.triangles.iter())
                     .map(|t| t.map(|v| weld[v as usize]))
                     .collect(),
+                colors: Vec::new(),
             };
             assert_eq!(analyze(&welded).degenerate_triangles, 0, "shift {shift}");
             assert_eq!(back.triangles.len(), triangles, "shift {shift}");
             assert!((back.vertices[1][0] - (shift + 1.0)).abs() < 1e-6);
         }
-        // The PLY writer (f32 too) merges the same way.
-        let ply = crate::io::write::encode_ply(&mesh).unwrap();
-        let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
-        let header = String::from_utf8_lossy(&ply[..text_end]);
-        assert!(header.contains("element vertex 5") && header.contains("element face 6"));
+        // The PLY writer merges the same way near the origin (f32 coordinates); far from it, it
+        // writes f64 coordinates and keeps both apexes.
+        for (shift, head) in [
+            (
+                0.0,
+                "property float x\nproperty float y\nproperty float z\nelement face 6",
+            ),
+            (
+                b,
+                "property double x\nproperty double y\nproperty double z\nelement face 8",
+            ),
+        ] {
+            let mut m = mesh.clone();
+            m.vertices
+                .iter_mut()
+                .for_each(|p| *p = p.map(|c| c - b + shift));
+            let ply = crate::io::write::encode_ply(&m, &Default::default()).unwrap();
+            let text_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap();
+            let header = String::from_utf8_lossy(&ply[..text_end]);
+            let vertices = if shift == 0.0 { 5 } else { 6 };
+            assert!(
+                header.contains(&format!("element vertex {vertices}")),
+                "{header}"
+            );
+            assert!(header.contains(head), "{header}");
+        }
         // Nothing to merge: borrowed as is.
         let far = TriMesh {
             vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
             normals: vec![],
             triangles: vec![[0, 1, 2]],
+            colors: Vec::new(),
         };
         assert!(matches!(merge_f32_duplicates(&far), Cow::Borrowed(_)));
     }

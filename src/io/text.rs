@@ -312,6 +312,7 @@ pub(crate) fn read_text_points<R: BufRead>(
     Ok(PointCloud {
         points: sink.points,
         normals: has_normals.then_some(sink.normals),
+        ..Default::default()
     })
 }
 

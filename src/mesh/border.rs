@@ -169,6 +169,7 @@ mod tests {
             vertices,
             normals: vec![],
             triangles,
+            colors: Vec::new(),
         }
     }
 
@@ -214,6 +215,7 @@ mod tests {
             ],
             normals: vec![],
             triangles: vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
+            colors: Vec::new(),
         };
         assert_eq!(analyze(&mesh).non_manifold_edges, 1);
         assert_eq!(make_manifold(&mut mesh), 1);

@@ -227,6 +227,7 @@ fn mean_max(samples: &[Point3], dist: impl Fn(Point3) -> f64 + Sync) -> (f64, f6
 ///     vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
 ///     normals: vec![],
 ///     triangles: vec![[0, 1, 2]],
+///     colors: vec![],
 /// };
 /// let params = CompareParams { samples: 1000, ..Default::default() };
 /// let r = compare(&tri, Reference::Mesh(&tri), &params).unwrap();

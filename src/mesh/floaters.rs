@@ -188,6 +188,7 @@ mod tests {
             vertices: vec![],
             normals: vec![],
             triangles: vec![],
+            colors: Vec::new(),
         };
         tet(&mut mesh, [0.0; 3], 1.0); // carries 60 points
         tet(&mut mesh, [5.0, 0.0, 0.0], 1.0); // carries 40 points: a second object

@@ -8,6 +8,7 @@
 //!   data support.
 
 pub mod border;
+pub mod color;
 pub mod compare;
 mod distance;
 pub mod floaters;
@@ -17,6 +18,7 @@ pub(crate) mod test_meshes;
 pub mod topology;
 pub mod trim;
 
+pub use color::{ColorMode, vertex_colors};
 pub use compare::{CompareError, CompareParams, CompareReport, Reference, compare};
 pub use optimize::{OptimizeError, OptimizeStats, optimize_for_gpu};
 pub use topology::{MeshTopology, analyze, area, signed_volume};

@@ -61,6 +61,7 @@ pub enum OptimizeError {
 ///     vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
 ///     normals: vec![],
 ///     triangles: vec![[0, 1, 2], [0, 2, 3]],
+///     colors: vec![],
 /// };
 /// let stats = rbfsurf::mesh::optimize_for_gpu(&mut quad).unwrap();
 /// assert!(stats.acmr_after <= stats.acmr_before);
@@ -87,6 +88,7 @@ pub fn optimize_for_gpu(mesh: &mut TriMesh) -> Result<OptimizeStats, OptimizeErr
         let removed = nv;
         mesh.vertices.clear();
         mesh.normals.clear();
+        mesh.colors.clear();
         return Ok(OptimizeStats {
             acmr_before: 0.0,
             acmr_after: 0.0,
@@ -124,6 +126,9 @@ fn reorder_by_first_use(mesh: &mut TriMesh, indices: &mut [u32]) -> usize {
     mesh.vertices = order.iter().map(|&v| mesh.vertices[v as usize]).collect();
     if !mesh.normals.is_empty() {
         mesh.normals = order.iter().map(|&v| mesh.normals[v as usize]).collect();
+    }
+    if mesh.colors.len() == remap.len() {
+        mesh.colors = order.iter().map(|&v| mesh.colors[v as usize]).collect();
     }
     order.len()
 }

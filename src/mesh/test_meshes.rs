@@ -13,6 +13,7 @@ pub(crate) fn tetrahedron() -> TriMesh {
         ],
         normals: vec![],
         triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        colors: Vec::new(),
     }
 }
 
@@ -44,6 +45,7 @@ pub(crate) fn cube(min: [f64; 3], size: f64) -> TriMesh {
         vertices,
         normals: vec![],
         triangles,
+        colors: Vec::new(),
     }
 }
 
@@ -71,6 +73,7 @@ pub(crate) fn torus(big: f64, small: f64, n: u32, m: u32) -> TriMesh {
         vertices,
         normals: vec![],
         triangles,
+        colors: Vec::new(),
     }
 }
 

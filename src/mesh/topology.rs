@@ -219,6 +219,7 @@ fn count_non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> usize {
 ///     vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
 ///     normals: vec![],
 ///     triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+///     colors: vec![],
 /// };
 /// let t = rbfsurf::mesh::analyze(&tet);
 /// assert!(t.watertight && t.manifold && t.oriented);
@@ -449,6 +450,7 @@ mod tests {
             vertices: vec![[0.0; 3]; 5],
             normals: vec![],
             triangles: vec![[0, 1, 2], [0, 3, 4]],
+            colors: Vec::new(),
         };
         let t = analyze(&fan);
         assert_eq!(
@@ -463,6 +465,7 @@ mod tests {
             vertices: vec![[0.0; 3]; 5],
             normals: vec![],
             triangles: vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
+            colors: Vec::new(),
         };
         let t = analyze(&mesh);
         assert_eq!(t.non_manifold_edges, 1);

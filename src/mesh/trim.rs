@@ -131,6 +131,7 @@ mod tests {
                 [6, 8, 9],
                 [10, 11, 9],
             ],
+            colors: Vec::new(),
         };
         // [10, 11, 9] joins the pair through vertex 9: components are 4 and 3 triangles.
         let (flag, n) = small_components(&mesh, 0.8);
@@ -170,6 +171,7 @@ mod tests {
             vertices,
             normals: vec![],
             triangles,
+            colors: Vec::new(),
         };
         let mut drop = vec![false, false, false, false, true, true];
         assert_eq!(keep_enclosed_holes(&strip, &mut drop), 0);
@@ -189,6 +191,7 @@ mod tests {
             ],
             normals: vec![],
             triangles: vec![[0, 1, 2], [3, 4, 5]],
+            colors: Vec::new(),
         };
         let drop = unsupported_triangles(&mesh, &[[0.3, 0.3, 0.0]], 0.5);
         assert_eq!(drop, vec![false, true]);

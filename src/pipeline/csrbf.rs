@@ -28,6 +28,7 @@ pub fn fit_field(
 ) -> Result<FittedField, ReconError> {
     let (mut clean, clean_stats, normalization, points) =
         clean_and_normalize(cloud, params, progress, timings)?;
+    let point_colors = super::point_colors(&clean, params);
     let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
 
     progress.stage(crate::progress::Stage::Index);
@@ -125,6 +126,8 @@ pub fn fit_field(
         normals_reoriented,
         noise,
         smoothing: params.smoothing.lambda(),
+        color_mode: point_colors.as_ref().map(|_| params.color),
+        point_colors,
     })
 }
 

@@ -23,6 +23,7 @@ pub(super) fn fit_global(
 ) -> Result<FittedField, ReconError> {
     let (clean, clean_stats, normalization, points) =
         clean_and_normalize(cloud, params, progress, timings)?;
+    let point_colors = super::point_colors(&clean, params);
     progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();
     let index = build_index(&points, IndexKind::KdTree, 16)?;
@@ -77,5 +78,7 @@ pub(super) fn fit_global(
         normals_reoriented: 0,
         noise: Default::default(),
         smoothing: 0.0,
+        color_mode: point_colors.as_ref().map(|_| params.color),
+        point_colors,
     })
 }

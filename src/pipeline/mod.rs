@@ -66,6 +66,11 @@ pub struct FittedField {
     /// Switch of the local carrier's winding-number far field (`None` without one): the surface
     /// stage turns it off for a surface it trims open, whose sheet the tangent planes continue.
     pub far_field: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Colour value of each point of `points` for the `--color` mode (RGB in [0, 1]), when the
+    /// input has that attribute.
+    pub point_colors: Option<Vec<[f32; 3]>>,
+    /// The colour mode `point_colors` were taken for.
+    pub color_mode: Option<crate::mesh::ColorMode>,
 }
 
 /// Reconstruct a closed mesh from `cloud` (any units).
@@ -137,6 +142,7 @@ fn reconstruct_inner(
         *v = fit.normalization.inverse(v);
     }
     crate::mesh::optimize::optimize_for_gpu(&mut mesh)?;
+    let attributes = color_mesh(&mut mesh, &fit, cloud)?;
     let topology = crate::mesh::topology::analyze(&mesh);
     timings.post = t.elapsed().as_secs_f64();
     timings.total = start.elapsed().as_secs_f64();
@@ -151,8 +157,45 @@ fn reconstruct_inner(
             peak_rss_mib: peak_rss_mib(),
         },
         polygonize,
+        attributes,
     };
     Ok(Reconstruction { mesh, report })
+}
+
+/// Colours the vertices of `mesh` (input units) from the fitted points' colour values, blended
+/// within the support radius in normalised units ([`crate::mesh::vertex_colors`]); reports what
+/// the input carried.
+fn color_mesh(
+    mesh: &mut TriMesh,
+    fit: &FittedField,
+    cloud: &PointCloud,
+) -> Result<crate::report::AttributesReport, ReconError> {
+    let mut report = crate::report::AttributesReport {
+        input_rgb: cloud.colors.is_some(),
+        input_intensity: cloud.intensity.is_some(),
+        color: "none",
+        colored_vertices: 0,
+        crs: cloud.crs.clone(),
+    };
+    let (Some(values), Some(mode)) = (&fit.point_colors, fit.color_mode) else {
+        return Ok(report);
+    };
+    let local: Vec<Point3> = (mesh.vertices.iter())
+        .map(|v| fit.normalization.forward(v))
+        .collect();
+    mesh.colors = crate::mesh::vertex_colors(&local, &fit.points, values, fit.support_radius)?;
+    report.color = mode.name();
+    report.colored_vertices = mesh.colors.len();
+    Ok(report)
+}
+
+/// The colour values of the cleaned points for `params.color` (see [`FittedField::point_colors`]).
+pub(crate) fn point_colors(clean: &PointCloud, params: &ReconParams) -> Option<Vec<[f32; 3]>> {
+    crate::mesh::color::point_values(
+        params.color,
+        clean.colors.as_deref(),
+        clean.intensity.as_deref(),
+    )
 }
 
 /// Grid resolution from the median point spacing (normalised units): about one cell per spacing,

@@ -6,8 +6,8 @@
 
 use crate::error::{ErrorKind, ReconError};
 use crate::io::{
-    IoError, MeshFormat, PointFormat, ReadLimits, parse_point_cloud, peek_point_count,
-    read_point_cloud, write_atomic, write_mesh,
+    IoError, MeshFormat, MeshMeta, PointFormat, ReadLimits, parse_point_cloud, peek_point_count,
+    read_point_cloud, write_atomic, write_mesh_with,
 };
 use crate::params::ReconParams;
 use crate::progress::{Progress, Stage};
@@ -126,7 +126,10 @@ pub fn run(
     super::check_cancel(progress).map_err(recon_err)?;
     progress.stage(Stage::Write);
     let t = Instant::now();
-    write_mesh(output.mesh, &rec.mesh, output.format).map_err(RunError::Write)?;
+    let meta = MeshMeta {
+        crs: rec.report.attributes.crs.clone(),
+    };
+    write_mesh_with(output.mesh, &rec.mesh, output.format, &meta).map_err(RunError::Write)?;
     rec.report.timings_s.read = read_s;
     rec.report.timings_s.write = t.elapsed().as_secs_f64();
     rec.report.timings_s.total = start.elapsed().as_secs_f64();

@@ -154,6 +154,7 @@ fn weld(blocks: &[BlockMesh]) -> Result<TriMesh, PolygonizeError> {
         vertices: Vec::with_capacity(upper),
         normals: Vec::with_capacity(upper),
         triangles: Vec::with_capacity(triangles),
+        colors: Vec::new(),
     };
     let mut to_global: Vec<u32> = Vec::new();
     for block in blocks {

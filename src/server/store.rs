@@ -19,6 +19,8 @@ pub fn input_ext(format: PointFormat) -> &'static str {
         PointFormat::Pts => "pts",
         PointFormat::Csv => "csv",
         PointFormat::Obj => "obj",
+        PointFormat::Las => "las",
+        PointFormat::E57 => "e57",
     }
 }
 

@@ -155,6 +155,7 @@ fn a_hole_closes_with_boundary_closed_and_the_data_side_stays_exact() {
     let cloud = PointCloud {
         points,
         normals: Some(normals),
+        ..Default::default()
     };
     let rec = reconstruct(
         &cloud,
@@ -184,6 +185,7 @@ fn a_hole_closes_with_boundary_closed_and_the_data_side_stays_exact() {
             .filter(|p| p[2] < 0.78)
             .copied()
             .collect(),
+        colors: Vec::new(),
     };
     let err = common::max_vertex_error(&below, |p| shape.signed_distance(p));
     assert!(err < 0.01, "max vertex error on the data side {err}");
@@ -258,6 +260,7 @@ fn a_cloud_of_pure_noise_is_reported_not_meshed_silently() {
     let cloud = PointCloud {
         points,
         normals: None,
+        ..Default::default()
     };
     let r = reconstruct(&cloud, &params(Blocks::None, 1), &NoProgress);
     match r {

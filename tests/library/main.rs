@@ -9,3 +9,6 @@ mod open_scans;
 mod parser_soak;
 mod pipeline;
 mod run;
+mod scanner_files;
+mod scanners;
+mod scanners_independent;

@@ -44,6 +44,7 @@ fn range_image_with_holes(n: usize) -> PointCloud {
     PointCloud {
         points,
         normals: Some(normals),
+        ..Default::default()
     }
 }
 

@@ -60,6 +60,7 @@ fn points_far_from_the_origin_give_the_same_mesh_shifted() {
             .map(|p| [p[0] + shift, p[1] + shift, p[2] + shift])
             .collect(),
         normals: cloud.normals.clone(),
+        ..Default::default()
     };
     let a = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
     let b = reconstruct(&moved, &ReconParams::default(), &NoProgress).unwrap();
@@ -213,6 +214,7 @@ fn planar_points_with_a_linear_polynomial_are_refused_as_singular() {
     let cloud = PointCloud {
         normals: Some(vec![[0.0, 0.0, 1.0]; points.len()]),
         points,
+        ..Default::default()
     };
     let p = ReconParams {
         polynomial: Polynomial::Linear,
@@ -292,6 +294,7 @@ fn a_single_range_image_gives_an_open_surface_on_the_data() {
                 .map(|&i| full.normals.as_ref().unwrap()[i])
                 .collect(),
         ),
+        ..Default::default()
     };
     let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
     let m = &rec.report.mesh;

@@ -87,6 +87,67 @@ async fn wait_returns_the_finished_job_and_every_download() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn las_laz_and_e57_uploads_give_coloured_georeferenced_meshes() {
+    use crate::scanner_files::{E57Coords, LasSpec, Scan, e57_bytes, las_bytes};
+    let s = start(|_| {});
+    let centre = [500_000.0, 4_100_000.0, 300.0];
+    let shape = rbfsurf::geometry::synthetic::Shape::Sphere {
+        center: centre,
+        radius: 10.0,
+    };
+    let scan = Scan::on_grid(&shape.sample(1500, 2).points, centre, centre, 10.0);
+    let mut spec = LasSpec::new((1, 2), 3, false);
+    spec.epsg = Some(32633);
+    let las = las_bytes(&scan, &spec);
+    spec.laz = true;
+    let laz = las_bytes(&scan, &spec);
+    let e57 = e57_bytes(&scan, 2, E57Coords::Cartesian, Some("EPSG:32633"));
+    // LAS by its media type; LAZ and E57 as octet streams, recognised by their signatures.
+    for (name, ctype, body) in [
+        ("las", "application/vnd.las", las),
+        ("laz", "application/octet-stream", laz),
+        ("e57", "application/octet-stream", e57),
+    ] {
+        let uri = format!("/v1/reconstructions?{SMALL}&wait=60");
+        let a = post(&s.app, &uri, ctype, body).await;
+        assert_eq!(
+            a.status,
+            StatusCode::OK,
+            "{name}: {}",
+            String::from_utf8_lossy(&a.body)
+        );
+        let job = a.json();
+        assert_eq!(job["status"], "succeeded", "{name}: {job}");
+        assert_eq!(job["input"]["points"], 1500, "{name}");
+        let attrs = &job["report"]["attributes"];
+        assert_eq!(attrs["color"], "rgb", "{name}: {attrs}");
+        assert_eq!(attrs["crs"], "EPSG:32633", "{name}");
+        let id = job["id"].as_str().unwrap();
+        let glb = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.glb")).await;
+        let mesh = rbfsurf::io::decode_glb(&glb.body).unwrap();
+        assert_eq!(mesh.colors.len(), mesh.vertices.len(), "{name}");
+        assert_eq!(
+            rbfsurf::io::glb_crs(&glb.body).as_deref(),
+            Some("EPSG:32633")
+        );
+        // Vertices at UTM coordinates, within centimetres of the sphere.
+        let worst = (mesh.vertices.iter())
+            .map(|v| (shape.signed_distance(v)).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.5, "{name}: {worst} m off the sphere");
+        let ply = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.ply")).await;
+        let head = String::from_utf8_lossy(&ply.body[..600]).into_owned();
+        for needle in [
+            "comment crs EPSG:32633",
+            "property double x",
+            "property uchar red",
+        ] {
+            assert!(head.contains(needle), "{name}: {needle}: {head}");
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn multipart_upload_takes_file_and_parameter_fields() {
     let s = start(|_| {});
     let b = "XbOuNdArY";

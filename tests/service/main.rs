@@ -7,6 +7,8 @@ mod cli;
 mod common;
 mod http;
 mod load;
+#[path = "../library/scanner_files.rs"]
+mod scanner_files;
 #[path = "../server_common/mod.rs"]
 mod server_common;
 mod submit;

@@ -215,6 +215,7 @@ impl Shape {
         PointCloud {
             points,
             normals: Some(normals),
+            ..Default::default()
         }
     }
 }

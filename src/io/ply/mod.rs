@@ -73,6 +73,7 @@ pub(crate) fn read_ply_points<R: BufRead>(
     Ok(PointCloud {
         points: c.points,
         normals: c.normals,
+        ..Default::default()
     })
 }
 
@@ -104,6 +105,7 @@ pub(crate) fn read_ply_mesh(
         vertices: c.points,
         normals,
         triangles: c.triangles,
+        colors: Vec::new(),
     })
 }
 

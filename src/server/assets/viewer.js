@@ -1,6 +1,7 @@
 // rbfsurf viewer: upload a point file, follow the job by server-sent events, then show the
 // returned binary glTF with plain WebGL (no libraries, works offline). The GLB reader handles the
-// files rbfsurf writes: one indexed triangle primitive with POSITION (+ NORMAL).
+// files rbfsurf writes: one indexed triangle primitive with POSITION (+ NORMAL, + COLOR_0 vertex
+// colours, linear RGB in the file, shown sRGB-encoded; orange when the mesh has none).
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -10,7 +11,8 @@ let chosen = null;
 function mediaType(name) {
   const ext = name.split(".").pop().toLowerCase();
   return { ply: "application/ply", csv: "text/csv", obj: "model/obj", xyz: "text/plain",
-           pts: "text/plain", txt: "text/plain" }[ext] || "application/octet-stream";
+           pts: "text/plain", txt: "text/plain", las: "application/vnd.las",
+           laz: "application/vnd.laszip" }[ext] || "application/octet-stream";
 }
 
 function setStatus(text, isError) {
@@ -28,7 +30,7 @@ function choose(file) {
 function queryString() {
   const q = new URLSearchParams();
   for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver", "boundary",
-                   "min-component", "smoothing", "outlier-std-ratio"]) {
+                   "min-component", "smoothing", "outlier-std-ratio", "color"]) {
     const v = $(k).value.trim();
     if (v) q.set(k, v);
   }
@@ -101,7 +103,7 @@ async function finished(v) {
     const buf = await (await fetch(`${base}/mesh.glb`)).arrayBuffer();
     const mesh = parseGlb(buf);
     viewer.setMesh(mesh);
-    setStatus(`loaded ${mesh.indices.length / 3} triangles`);
+    setStatus(`loaded ${mesh.indices.length / 3} triangles` + (mesh.colored ? " with vertex colours" : ""));
   } catch (e) {
     setStatus("Cannot display the mesh: " + e.message, true);
   }
@@ -158,7 +160,22 @@ function parseGlb(buf) {
   const positions = read(prim.attributes.POSITION, 3);
   const indices = Uint32Array.from(read(prim.indices, 1));
   const normals = prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : vertexNormals(positions, indices);
-  return { positions, normals, indices };
+  const colored = prim.attributes.COLOR_0 !== undefined;
+  return { positions, normals, indices, colored, colors: colored ? vertexColors(json, prim, read, positions.length / 3) : null };
+}
+
+// COLOR_0 as sRGB-encoded floats for display (the file holds linear RGB, VEC3 or VEC4; float or
+// normalized unsigned byte/short).
+function vertexColors(json, prim, read, n) {
+  const acc = json.accessors[prim.attributes.COLOR_0];
+  const comps = acc.type === "VEC4" ? 4 : 3;
+  const raw = read(prim.attributes.COLOR_0, comps);
+  const scale = { 5126: 1, 5121: 1 / 255, 5123: 1 / 65535 }[acc.componentType] || 1;
+  const out = new Float32Array(n * 3);
+  const encode = (c) => c <= 0.0031308 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
+  for (let i = 0; i < n; i++)
+    for (let d = 0; d < 3; d++) out[i * 3 + d] = encode(Math.min(1, Math.max(0, raw[i * comps + d] * scale)));
+  return out;
 }
 
 function vertexNormals(p, idx) {
@@ -180,11 +197,12 @@ function createViewer(canvas) {
   if (!gl) { setStatus("WebGL is not available in this browser.", true); return { setMesh() {} }; }
   const isGl2 = typeof WebGL2RenderingContext !== "undefined" && gl instanceof WebGL2RenderingContext;
   if (!isGl2 && !gl.getExtension("OES_element_index_uint")) setStatus("32-bit indices unsupported.", true);
-  const vs = `attribute vec3 aPos; attribute vec3 aNrm; uniform mat4 uMvp; uniform mat4 uView; varying vec3 vN;
-    void main() { gl_Position = uMvp * vec4(aPos, 1.0); vN = mat3(uView) * aNrm; }`;
-  const fs = `precision mediump float; varying vec3 vN; uniform vec3 uColor;
+  const vs = `attribute vec3 aPos; attribute vec3 aNrm; attribute vec3 aCol; uniform mat4 uMvp; uniform mat4 uView;
+    varying vec3 vN; varying vec3 vC;
+    void main() { gl_Position = uMvp * vec4(aPos, 1.0); vN = mat3(uView) * aNrm; vC = aCol; }`;
+  const fs = `precision mediump float; varying vec3 vN; varying vec3 vC;
     void main() { vec3 n = normalize(vN); float d = abs(n.z);
-      gl_FragColor = vec4(uColor * (0.25 + 0.75 * d) + vec3(0.15) * pow(d, 24.0), 1.0); }`;
+      gl_FragColor = vec4(vC * (0.25 + 0.75 * d) + vec3(0.15) * pow(d, 24.0), 1.0); }`;
   const compile = (type, src) => {
     const s = gl.createShader(type); gl.shaderSource(s, src); gl.compileShader(s);
     if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
@@ -195,8 +213,8 @@ function createViewer(canvas) {
   gl.attachShader(prog, compile(gl.FRAGMENT_SHADER, fs));
   gl.linkProgram(prog);
   const loc = { pos: gl.getAttribLocation(prog, "aPos"), nrm: gl.getAttribLocation(prog, "aNrm"),
-    mvp: gl.getUniformLocation(prog, "uMvp"), view: gl.getUniformLocation(prog, "uView"),
-    color: gl.getUniformLocation(prog, "uColor") };
+    col: gl.getAttribLocation(prog, "aCol"),
+    mvp: gl.getUniformLocation(prog, "uMvp"), view: gl.getUniformLocation(prog, "uView") };
   const state = { yaw: 0.6, pitch: 0.35, dist: 3.4, count: 0, center: [0, 0, 0], scale: 1 };
   let buffers = null;
 
@@ -207,8 +225,13 @@ function createViewer(canvas) {
     state.center = lo.map((l, d) => (l + hi[d]) / 2);
     state.scale = 2 / Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-30);
     const mk = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
+    let colors = m.colors;
+    if (!colors) {
+      colors = new Float32Array(m.positions.length);
+      for (let i = 0; i < colors.length; i += 3) colors.set([0.88, 0.53, 0.23], i);
+    }
     buffers = { pos: mk(gl.ARRAY_BUFFER, m.positions), nrm: mk(gl.ARRAY_BUFFER, new Float32Array(m.normals)),
-                idx: mk(gl.ELEMENT_ARRAY_BUFFER, m.indices) };
+                col: mk(gl.ARRAY_BUFFER, colors), idx: mk(gl.ELEMENT_ARRAY_BUFFER, m.indices) };
     state.count = m.indices.length;
     resetView();
   }
@@ -232,11 +255,12 @@ function createViewer(canvas) {
     const proj = perspective(0.8, w / Math.max(h, 1), 0.01, 100);
     gl.uniformMatrix4fv(loc.mvp, false, mul(proj, view));
     gl.uniformMatrix4fv(loc.view, false, view);
-    gl.uniform3f(loc.color, 0.88, 0.53, 0.23);
     gl.bindBuffer(gl.ARRAY_BUFFER, buffers.pos);
     gl.enableVertexAttribArray(loc.pos); gl.vertexAttribPointer(loc.pos, 3, gl.FLOAT, false, 0, 0);
     gl.bindBuffer(gl.ARRAY_BUFFER, buffers.nrm);
     gl.enableVertexAttribArray(loc.nrm); gl.vertexAttribPointer(loc.nrm, 3, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffers.col);
+    gl.enableVertexAttribArray(loc.col); gl.vertexAttribPointer(loc.col, 3, gl.FLOAT, false, 0, 0);
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.idx);
     gl.drawElements(gl.TRIANGLES, state.count, gl.UNSIGNED_INT, 0);
   }

@@ -7,7 +7,10 @@ use super::{
     JobResponse, Pairs, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs,
 };
 use crate::error::ErrorKind;
-use crate::io::{MeshFormat, PointFormat, ReadLimits, decode_glb, parse_point_cloud, write_mesh};
+use crate::io::{
+    MeshFormat, MeshMeta, PointFormat, ReadLimits, decode_glb, glb_crs, parse_point_cloud,
+    write_mesh_with,
+};
 use crate::server::AppState;
 use crate::server::error::{ApiError, ErrorBody, ErrorResponse};
 use crate::server::jobs::{InputInfo, Job, JobStatus, JobView};
@@ -60,6 +63,7 @@ fn format_for_media_type(essence: &str) -> Option<BodyKind> {
         }
         "text/csv" => BodyKind::Raw(Some(PointFormat::Csv)),
         "model/obj" | "text/x-obj" => BodyKind::Raw(Some(PointFormat::Obj)),
+        "application/vnd.las" | "application/vnd.laszip" => BodyKind::Raw(Some(PointFormat::Las)),
         "text/plain" | "text/x-xyz" | "application/octet-stream" | "" => BodyKind::Raw(None),
         "multipart/form-data" => BodyKind::Multipart,
         _ => return None,
@@ -71,7 +75,7 @@ fn unsupported(what: &str) -> ApiError {
         StatusCode::UNSUPPORTED_MEDIA_TYPE,
         "unsupported_media_type",
         format!(
-            "{what}; send PLY (application/ply), XYZ/PTS text (text/plain), CSV (text/csv), OBJ (model/obj), application/octet-stream (sniffed) or multipart/form-data with a `file` part"
+            "{what}; send PLY (application/ply), XYZ/PTS text (text/plain), CSV (text/csv), OBJ (model/obj), LAS (application/vnd.las), LAZ (application/vnd.laszip), application/octet-stream (sniffed by magic bytes: PLY, LAS/LAZ, E57, text) or multipart/form-data with a `file` part"
         ),
     )
 }
@@ -170,7 +174,7 @@ async fn check_cloud(
     tokio::task::spawn_blocking(move || {
         let format = match hint {
             Some(PointFormat::Xyz) | None => PointFormat::sniff(&bytes)
-                .ok_or_else(|| unsupported("binary content that is not PLY"))?,
+                .ok_or_else(|| unsupported("binary content that is not PLY, LAS/LAZ or E57"))?,
             Some(f) => f,
         };
         let cloud = parse_point_cloud(&bytes, format, &limits)?;
@@ -188,10 +192,11 @@ async fn check_cloud(
 /// have the command line's names and ranges.
 #[utoipa::path(post, path = "/v1/reconstructions", tag = "reconstructions",
     params(crate::params::ReconOptions, WaitQuery),
-    request_body(description = "point file: PLY (ascii/binary), XYZ/PTS text, CSV, OBJ vertices; or multipart/form-data with `file`",
+    request_body(description = "point file: PLY (ascii/binary), XYZ/PTS text, CSV, OBJ vertices, LAS/LAZ 1.0–1.4, E57 (application/octet-stream, sniffed by its `ASTM-E57` signature; LAS/LAZ by `LASF`, PLY by `ply`); or multipart/form-data with `file`",
         content(
             (Vec<u8> = "application/ply"), (String = "text/plain"), (String = "text/csv"),
-            (String = "model/obj"), (Vec<u8> = "application/octet-stream"), (Vec<u8> = "multipart/form-data"))),
+            (String = "model/obj"), (Vec<u8> = "application/vnd.las"), (Vec<u8> = "application/vnd.laszip"),
+            (Vec<u8> = "application/octet-stream"), (Vec<u8> = "multipart/form-data"))),
     responses(
         (status = 202, description = "accepted and queued", body = JobResponse),
         (status = 200, description = "finished within `wait`", body = JobResponse),
@@ -397,7 +402,10 @@ async fn mesh_file(st: &AppState, id: &str, format: MeshFormat) -> Result<Respon
                 path: glb.clone(),
                 source,
             })?;
-            write_mesh(&out, &decode_glb(&bytes)?, format)
+            let meta = MeshMeta {
+                crs: glb_crs(&bytes),
+            };
+            write_mesh_with(&out, &decode_glb(&bytes)?, format, &meta)
         })
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?

@@ -1,6 +1,8 @@
 //! Binary glTF 2.0 (GLB): encoder (one buffer; POSITION f32 VEC3 with exact min/max, NORMAL f32
-//! VEC3 unit length, u32 indices; one mesh/node/scene) with a read-back check, and a decoder that
-//! reads POSITION (+ NORMAL) and indices of every triangle primitive from the BIN chunk.
+//! VEC3 unit length, COLOR_0 f32 VEC3 linear RGB when the mesh has colours, u32 indices; one
+//! mesh/node/scene; a far-from-origin mesh stored relative to a node translation; the CRS in
+//! `asset.extras.crs`) with a read-back check, and a decoder that reads POSITION (+ NORMAL,
+//! COLOR_0) and indices of every triangle primitive from the BIN chunk.
 //!
 //! The decoder reads accessors itself with checked arithmetic (no panics on hostile offsets) and
 //! ignores node transforms (meshes are taken in their own frame). Time and memory O(mesh size).
@@ -9,12 +11,16 @@
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 
-use super::{IoError, MEMORY_SOURCE};
+mod decode;
+
+pub(crate) use decode::decode_glb_named;
+pub use decode::{decode_glb, glb_crs};
+
+use super::{IoError, MeshMeta};
 use crate::geometry::{Point3, TriMesh, cross, normalized, sub};
 
 const GENERATOR: &str = "rbfsurf";
@@ -54,6 +60,18 @@ pub(crate) fn check_mesh(mesh: &TriMesh, format: &'static str) -> Result<(), IoE
     {
         return Err(err(format!(
             "triangle {t} {tri:?} refers to a vertex ≥ {n}"
+        )));
+    }
+    if !mesh.colors.is_empty() && mesh.colors.len() != n {
+        return Err(err(format!(
+            "{} colours for {n} vertices (must be equal, or no colours)",
+            mesh.colors.len()
+        )));
+    }
+    if let Some(v) = (mesh.colors.iter()).position(|c| c.iter().any(|x| !(0.0..=1.0).contains(x))) {
+        return Err(err(format!(
+            "vertex {v} has a colour outside [0, 1]: {:?}",
+            mesh.colors[v]
         )));
     }
     if let Some(v) = mesh
@@ -152,12 +170,18 @@ fn push_accessor(
 /// ```
 /// use rbfsurf::geometry::TriMesh;
 /// let mesh = TriMesh { vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-///                      normals: vec![], triangles: vec![[0, 1, 2]] };
+///                      normals: vec![], triangles: vec![[0, 1, 2]], colors: vec![] };
 /// let glb = rbfsurf::io::encode_glb(&mesh).unwrap();
 /// assert_eq!(&glb[..4], b"glTF");
 /// assert_eq!(rbfsurf::io::decode_glb(&glb).unwrap().triangles, mesh.triangles);
 /// ```
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
+    encode_glb_with(mesh, &MeshMeta::default())
+}
+
+/// [`encode_glb`] with metadata: `meta.crs` goes to `asset.extras.crs`. Vertex colours (sRGB in
+/// [`TriMesh::colors`]) are written as `COLOR_0` in linear RGB, as glTF requires.
+pub fn encode_glb_with(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoError> {
     check_mesh(mesh, "GLB")?;
     let origin = origin_for(mesh);
     let shifted = shift(mesh, origin);
@@ -169,19 +193,26 @@ pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
     let mut bin: Vec<u8> = Vec::with_capacity(pos.len() * 24 + mesh.triangles.len() * 12);
     bin.extend(pos.iter().flatten().flat_map(|c| c.to_le_bytes()));
     bin.extend(normals.iter().flatten().flat_map(|c| c.to_le_bytes()));
+    let linear = mesh.colors.iter().flatten().map(|&c| srgb_to_linear(c));
+    bin.extend(linear.flat_map(|c| c.to_le_bytes()));
     let flat = mesh.triangles.iter().flatten();
     bin.extend(flat.flat_map(|i| i.to_le_bytes()));
     let layout = Layout {
         vertices: pos.len(),
         indices: mesh.triangles.len() * 3,
         normals: !normals.is_empty(),
+        colors: !mesh.colors.is_empty(),
         bin_len: bin.len(),
         bounds,
         origin,
     };
-    let out = container(&document(&layout), bin)?;
+    let out = container(&document(&layout), meta, bin)?;
     let back = decode_glb(&out).map_err(|e| enc_err(format!("read-back failed: {e}")))?;
-    if back.vertices.len() != pos.len() || back.triangles.len() != mesh.triangles.len() {
+    let colors_back = back.colors.len() == mesh.colors.len();
+    if back.vertices.len() != pos.len()
+        || back.triangles.len() != mesh.triangles.len()
+        || !colors_back
+    {
         return Err(enc_err(format!(
             "read-back mismatch: wrote {} vertices / {} triangles, read {} / {}",
             pos.len(),
@@ -219,6 +250,8 @@ struct Layout {
     vertices: usize,
     indices: usize,
     normals: bool,
+    /// A COLOR_0 section (f32 VEC3) follows the normals.
+    colors: bool,
     bin_len: usize,
     bounds: Bounds,
     /// Node translation (the positions are stored relative to it), `None` at the origin.
@@ -229,7 +262,7 @@ struct Layout {
 /// extent), its bbox centre rounded to f32 (exactly representable, so `origin + p` loses nothing
 /// but the f32 rounding of the small relative `p`: at x ≈ 6·10⁵ absolute f32 coordinates are
 /// 0.06 apart); `None` otherwise (positions stored as they are).
-fn origin_for(mesh: &TriMesh) -> Option<[f32; 3]> {
+pub(crate) fn origin_for(mesh: &TriMesh) -> Option<[f32; 3]> {
     let b = crate::geometry::Aabb::from_points(&mesh.vertices);
     let (c, e) = (b.center(), b.extent());
     let far = (0..3).any(|k| c[k].abs() > e.iter().fold(0.0f64, |a, &x| a.max(x)));
@@ -247,6 +280,7 @@ fn shift(mesh: &TriMesh, origin: Option<[f32; 3]>) -> Cow<'_, TriMesh> {
                 .collect(),
             normals: mesh.normals.clone(),
             triangles: mesh.triangles.clone(),
+            colors: mesh.colors.clone(),
         }),
     }
 }
@@ -274,7 +308,13 @@ fn document(l: &Layout) -> json::Root {
         let na = push_accessor(&mut root, nv, l.vertices, vec3, None);
         attributes.insert(Valid(json::mesh::Semantic::Normals), na);
     }
-    let off = if l.normals { 2 * span } else { span };
+    let mut off = if l.normals { 2 * span } else { span };
+    if l.colors {
+        let cv = push_view(&mut root, buf, off, span, Target::ArrayBuffer);
+        let ca = push_accessor(&mut root, cv, l.vertices, vec3, None);
+        attributes.insert(Valid(json::mesh::Semantic::Colors(0)), ca);
+        off += span;
+    }
     let iv = push_view(
         &mut root,
         buf,
@@ -314,8 +354,13 @@ fn document(l: &Layout) -> json::Root {
 }
 
 /// GLB container: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
-fn container(root: &json::Root, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
-    let json_bytes = json::serialize::to_vec(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+/// `meta.crs`, when present, is added as `asset.extras.crs` (a string).
+fn container(root: &json::Root, meta: &MeshMeta, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
+    let mut value = json::serialize::to_value(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+    if let (Some(crs), Some(asset)) = (&meta.crs, value.get_mut("asset")) {
+        asset["extras"] = serde_json::json!({ "crs": crs });
+    }
+    let json_bytes = serde_json::to_vec(&value).map_err(|e| enc_err(format!("JSON: {e}")))?;
     let glb = gltf::binary::Glb {
         header: gltf::binary::Header {
             magic: *b"glTF",
@@ -331,181 +376,22 @@ fn container(root: &json::Root, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
     Ok(out)
 }
 
-/// Decodes GLB bytes into one triangle mesh (all triangle primitives of all meshes, concatenated;
-/// a mesh is moved by the translation of the first node that uses it, other node transforms are
-/// ignored). Normals are kept only when every primitive has them.
-pub fn decode_glb(bytes: &[u8]) -> Result<TriMesh, IoError> {
-    decode_glb_named(bytes, Path::new(MEMORY_SOURCE))
-}
-
-pub(crate) fn decode_glb_named(bytes: &[u8], src: &Path) -> Result<TriMesh, IoError> {
-    let invalid = |message: String| IoError::Invalid {
-        path: src.to_path_buf(),
-        format: "GLB",
-        message,
-    };
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid(e.to_string()))?;
-    let blob: &[u8] = gltf.blob.as_deref().unwrap_or_default();
-    let mut out = TriMesh::default();
-    let mut all_normals = true;
-    for mesh in gltf.document.meshes() {
-        let t = (gltf.document.nodes())
-            .find(|n| n.mesh().is_some_and(|m| m.index() == mesh.index()))
-            .map_or([0.0; 3], |n| n.transform().decomposed().0);
-        for prim in mesh.primitives() {
-            if prim.mode() != gltf::mesh::Mode::Triangles {
-                continue;
-            }
-            let acc = prim
-                .get(&gltf::Semantic::Positions)
-                .ok_or_else(|| invalid("triangle primitive without POSITION".into()))?;
-            let base = out.vertices.len();
-            let pos = read_vec3(&acc, blob, src)?;
-            let count = pos.len();
-            out.vertices.extend(
-                pos.into_iter()
-                    .map(|p| [0, 1, 2].map(|k| p[k] + f64::from(t[k]))),
-            );
-            match prim.get(&gltf::Semantic::Normals) {
-                Some(nacc) if all_normals => {
-                    let ns = read_vec3(&nacc, blob, src)?;
-                    if ns.len() != count {
-                        return Err(invalid(format!(
-                            "NORMAL has {} entries, POSITION {count}",
-                            ns.len()
-                        )));
-                    }
-                    out.normals.extend(ns);
-                }
-                _ => all_normals = false,
-            }
-            let idx: Vec<u32> = match prim.indices() {
-                Some(iacc) => read_indices(&iacc, blob, src)?,
-                None => (0..count as u32).collect(),
-            };
-            if !idx.len().is_multiple_of(3) {
-                return Err(invalid(format!(
-                    "{} indices is not a multiple of 3",
-                    idx.len()
-                )));
-            }
-            if let Some(bad) = idx.iter().find(|&&i| i as usize >= count) {
-                return Err(invalid(format!("index {bad} ≥ vertex count {count}")));
-            }
-            let base = u32::try_from(base).map_err(|_| invalid("too many vertices".into()))?;
-            out.triangles.extend(
-                idx.chunks_exact(3)
-                    .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
-            );
-        }
-    }
-    if !all_normals {
-        out.normals.clear();
-    }
-    Ok(out)
-}
-
-/// The bytes of each element of a non-sparse accessor stored in the BIN chunk: (slice, stride, element size, count).
-fn accessor_span<'b>(
-    acc: &gltf::Accessor,
-    blob: &'b [u8],
-    src: &Path,
-) -> Result<(&'b [u8], usize, usize, usize), IoError> {
-    let unsupported = |feature: &str| IoError::Unsupported {
-        path: src.to_path_buf(),
-        format: "GLB",
-        feature: feature.into(),
-    };
-    if acc.sparse().is_some() {
-        return Err(unsupported("sparse accessors"));
-    }
-    let view = acc
-        .view()
-        .ok_or_else(|| unsupported("accessors without a bufferView"))?;
-    if !matches!(view.buffer().source(), gltf::buffer::Source::Bin) {
-        return Err(unsupported("external (URI) buffers"));
-    }
-    let elem = acc.size();
-    let stride = view.stride().unwrap_or(elem).max(elem);
-    let count = acc.count();
-    let view_bytes = view
-        .offset()
-        .checked_add(view.length())
-        .and_then(|end| blob.get(view.offset()..end));
-    let need = count
-        .checked_sub(1)
-        .map_or(Some(0), |c| c.checked_mul(stride)?.checked_add(elem))
-        .and_then(|n| n.checked_add(acc.offset()));
-    match (view_bytes, need) {
-        (Some(v), Some(need)) if need <= v.len() => {
-            Ok((&v[acc.offset()..need], stride, elem, count))
-        }
-        _ => Err(IoError::Truncated {
-            path: src.to_path_buf(),
-            format: "GLB",
-            what: format!(
-                "accessor {} needs {count} elements of {elem} bytes",
-                acc.index()
-            ),
-            expected: need.unwrap_or(usize::MAX) as u64,
-            found: blob.len() as u64,
-        }),
+/// sRGB transfer function inverse (IEC 61966-2-1): encoded value in [0, 1] → linear light.
+pub(crate) fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
     }
 }
 
-fn read_vec3(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<Point3>, IoError> {
-    use gltf::accessor::{DataType, Dimensions};
-    if acc.data_type() != DataType::F32 || acc.dimensions() != Dimensions::Vec3 {
-        return Err(IoError::Unsupported {
-            path: src.to_path_buf(),
-            format: "GLB",
-            feature: format!(
-                "vertex attribute of type {:?} {:?} (expected f32 VEC3)",
-                acc.data_type(),
-                acc.dimensions()
-            ),
-        });
+/// sRGB transfer function: linear light in [0, 1] → encoded value.
+pub(crate) fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
     }
-    let (bytes, stride, _, count) = accessor_span(acc, blob, src)?;
-    let f = |o: usize| {
-        f64::from(f32::from_le_bytes([
-            bytes[o],
-            bytes[o + 1],
-            bytes[o + 2],
-            bytes[o + 3],
-        ]))
-    };
-    Ok((0..count)
-        .map(|i| i * stride)
-        .map(|o| [f(o), f(o + 4), f(o + 8)])
-        .collect())
-}
-
-fn read_indices(acc: &gltf::Accessor, blob: &[u8], src: &Path) -> Result<Vec<u32>, IoError> {
-    use gltf::accessor::{DataType, Dimensions};
-    let (bytes, stride, elem, count) = accessor_span(acc, blob, src)?;
-    let ok = acc.dimensions() == Dimensions::Scalar
-        && matches!(
-            acc.data_type(),
-            DataType::U8 | DataType::U16 | DataType::U32
-        );
-    if !ok {
-        return Err(IoError::Invalid {
-            path: src.to_path_buf(),
-            format: "GLB",
-            message: "indices must be u8, u16 or u32 scalars".into(),
-        });
-    }
-    Ok((0..count)
-        .map(|i| {
-            let b = &bytes[i * stride..i * stride + elem];
-            match elem {
-                1 => u32::from(b[0]),
-                2 => u32::from(u16::from_le_bytes([b[0], b[1]])),
-                _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-            }
-        })
-        .collect())
 }
 
 #[cfg(test)]
@@ -540,6 +426,7 @@ pub(crate) mod tests {
             vertices,
             normals,
             triangles,
+            colors: Vec::new(),
         }
     }
 
