@@ -326,6 +326,7 @@ mod tests {
         let square = TriMesh {
             vertices: vec![[0.0; 3], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
             normals: vec![],
+            colors: vec![],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
         let grid = |z: f64| -> Vec<Point3> {
