@@ -14,6 +14,7 @@
 mod budget;
 mod error;
 mod glb;
+mod glb_anim;
 mod obj;
 mod off;
 mod ply;
@@ -30,6 +31,7 @@ use std::path::Path;
 pub use budget::{PointCountHint, peek_point_count, reader_peak_mib};
 pub use error::IoError;
 pub use glb::{decode_glb, encode_glb};
+pub use glb_anim::encode_animated_glb;
 pub use write::{write_atomic, write_mesh, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};

@@ -370,6 +370,18 @@ impl LocalCarrier {
             .iter()
             .map(|n| normalized(*n).unwrap_or([0.0; 3]))
             .collect();
+        Self::from_parts(points.to_vec(), normals, radius, index)
+    }
+
+    /// Rebuild from saved parts: the points, their unit normals exactly as [`Self::normals`] gave
+    /// them (not renormalised, so a loaded carrier evaluates bit for bit like the saved one), the
+    /// radius and an index over `points`. `None` when no normal is usable or the lengths differ.
+    pub fn from_parts(
+        points: Vec<Point3>,
+        normals: Vec<Point3>,
+        radius: f64,
+        index: Arc<dyn SpatialIndex + Send>,
+    ) -> Option<Self> {
         let valid_ids: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| normals[i as usize] != [0.0; 3])
             .collect();
@@ -379,13 +391,23 @@ impl LocalCarrier {
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
         let valid_tree = KdTree::build(&valid_points).ok()?;
         Some(LocalCarrier {
-            points: points.to_vec(),
+            points,
             normals,
             radius,
             index,
             valid_tree,
             valid_ids,
         })
+    }
+
+    /// The blended points, normalised units.
+    pub fn points(&self) -> &[Point3] {
+        &self.points
+    }
+
+    /// Their unit normals (zero where unusable).
+    pub fn normals(&self) -> &[Point3] {
+        &self.normals
     }
 
     /// Flip every normal (used when the input's normals turn out to point inwards).

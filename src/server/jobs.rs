@@ -445,10 +445,13 @@ impl JobManager {
         };
         let mesh = self.store.file(job.id, "mesh.glb");
         let report = self.store.file(job.id, "report.json");
+        // The fitted field too (`GET …/field`), when the method has a saved form.
+        let field = self.store.file(job.id, "fitted.field");
         let output = RunOutput {
             mesh: &mesh,
             format: MeshFormat::Glb,
             report: Some(&report),
+            field: (params.method == crate::params::Method::Csrbf).then_some(field.as_path()),
         };
         let source = PointSource::Bytes {
             data: &data,

@@ -39,6 +39,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(rec::mesh_ply))
         .routes(routes!(rec::mesh_obj))
         .routes(routes!(rec::job_report))
+        .routes(routes!(rec::job_field))
         .routes(routes!(meta::health))
         .routes(routes!(meta::openapi_json))
         .routes(routes!(meta::index))
