@@ -280,7 +280,7 @@ fn build_call(
     };
     let mut kids = children.into_iter();
     let mut next = || kids.next().expect("arity checked");
-    Ok(match name {
+    match name {
         "sphere" => Some(Solid::Sphere(
             [n[0], n[1], n[2]],
             positive(n[3], "the radius")?,
@@ -343,7 +343,7 @@ fn build_call(
             affine(next(), rotation(axis, n[3].to_radians()), [0.0; 3], 1.0)
         }
     }
-    .ok_or_else(|| bad("the map is not invertible".into()))?)
+    .ok_or_else(|| bad("the map is not invertible".into()))
 }
 
 const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];

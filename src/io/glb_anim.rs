@@ -15,7 +15,7 @@ use super::glb::{
 use crate::geometry::TriMesh;
 
 fn pad4(bin: &mut Vec<u8>) {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
 }
