@@ -175,6 +175,7 @@ pub fn parse(src: &str) -> Result<Expr, FrepError> {
 pub struct Loader {
     base: PathBuf,
     cache: HashMap<PathBuf, Arc<FieldModel>>,
+    files: bool,
 }
 
 impl Loader {
@@ -183,6 +184,17 @@ impl Loader {
         Loader {
             base: base.to_path_buf(),
             cache: HashMap::new(),
+            files: true,
+        }
+    }
+
+    /// A loader that never reads files: only names given to [`Self::insert`] resolve (the HTTP
+    /// service, whose operands are job ids).
+    pub fn preloaded_only() -> Self {
+        Loader {
+            base: PathBuf::new(),
+            cache: HashMap::new(),
+            files: false,
         }
     }
 
@@ -195,6 +207,12 @@ impl Loader {
         let path = self.base.join(p);
         if let Some(m) = self.cache.get(&path) {
             return Ok(Arc::clone(m));
+        }
+        if !self.files {
+            return Err(FrepError::Read {
+                path: p.to_string(),
+                message: "not a known operand".into(),
+            });
         }
         let m = Arc::new(format::read(&path)?);
         self.cache.insert(path, Arc::clone(&m));
@@ -214,13 +232,9 @@ pub fn build(e: &Expr, loader: &mut Loader) -> Result<Solid, FrepError> {
     }
 }
 
-fn build_call(
-    name: &str,
-    args: &[Expr],
-    col: usize,
-    loader: &mut Loader,
-) -> Result<Solid, FrepError> {
-    let (solids, nums, expected): (usize, &[usize], &'static str) = match name {
+/// `(solids, allowed numbers of numeric arguments, description)` of an operation.
+fn signature(name: &str) -> Option<(usize, &'static [usize], &'static str)> {
+    Some(match name {
         "sphere" => (0, &[4], "4 numbers (cx, cy, cz, r)"),
         "box" => (0, &[6], "6 numbers (x0, y0, z0, x1, y1, z1)"),
         "cylinder" => (0, &[7], "7 numbers (x0, y0, z0, x1, y1, z1, r)"),
@@ -231,13 +245,22 @@ fn build_call(
         "translate" => (1, &[3], "a solid and 3 numbers"),
         "scale" => (1, &[1], "a solid and a factor"),
         "rotate" => (1, &[4], "a solid, an axis (3 numbers) and degrees"),
-        _ => {
-            return Err(FrepError::UnknownOperation {
-                name: name.to_string(),
-                column: col,
-            });
-        }
-    };
+        _ => return None,
+    })
+}
+
+/// Check the arguments against the operation's signature; build the solid operands and collect
+/// the numbers.
+fn arguments(
+    name: &str,
+    args: &[Expr],
+    col: usize,
+    loader: &mut Loader,
+) -> Result<(Vec<Box<Solid>>, Vec<f64>), FrepError> {
+    let (solids, nums, expected) = signature(name).ok_or_else(|| FrepError::UnknownOperation {
+        name: name.to_string(),
+        column: col,
+    })?;
     let arity = |got: String| FrepError::Arity {
         name: name.to_string(),
         column: col,
@@ -266,6 +289,16 @@ fn build_call(
             }
         }
     }
+    Ok((children, n))
+}
+
+fn build_call(
+    name: &str,
+    args: &[Expr],
+    col: usize,
+    loader: &mut Loader,
+) -> Result<Solid, FrepError> {
+    let (children, n) = arguments(name, args, col, loader)?;
     let bad = |message: String| FrepError::BadArgument {
         name: name.to_string(),
         column: col,

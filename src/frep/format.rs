@@ -304,34 +304,7 @@ fn decode_body(r: &mut Reader<'_>) -> Result<FieldModel, String> {
             .map_err(|e| e.to_string())
     };
     let carrier_index = build(&points)?;
-    let carrier = match r.u8()? {
-        0 => Carrier::Sphere {
-            center: r.p()?,
-            radius: positive(r.finite("the sphere radius")?, "the sphere radius")?,
-        },
-        1 => {
-            let center = r.p()?;
-            let axes = [r.p()?, r.p()?, r.p()?];
-            let semi_axes = r.p()?;
-            Carrier::Ellipsoid {
-                center,
-                axes,
-                semi_axes,
-            }
-        }
-        2 => {
-            let radius = positive(r.finite("the carrier radius")?, "the carrier radius")?;
-            let normals = r.points(n)?;
-            let local = LocalCarrier::from_parts(
-                points.clone(),
-                normals,
-                radius,
-                Arc::clone(&carrier_index),
-            );
-            Carrier::Local(local.ok_or("the local carrier has no usable normal")?)
-        }
-        t => return Err(format!("unknown carrier tag {t}")),
-    };
+    let carrier = read_carrier(r, &points, &carrier_index)?;
     let correction = match r.u8()? {
         0 => Correction::Global(read_spline(r, &build)?),
         1 => {
@@ -362,6 +335,37 @@ fn decode_body(r: &mut Reader<'_>) -> Result<FieldModel, String> {
         points,
         index,
         leaf_size,
+    })
+}
+
+fn read_carrier(
+    r: &mut Reader<'_>,
+    points: &[Point3],
+    index: &Arc<dyn SpatialIndex + Send>,
+) -> Result<Carrier, String> {
+    Ok(match r.u8()? {
+        0 => Carrier::Sphere {
+            center: r.p()?,
+            radius: positive(r.finite("the sphere radius")?, "the sphere radius")?,
+        },
+        1 => {
+            let center = r.p()?;
+            let axes = [r.p()?, r.p()?, r.p()?];
+            let semi_axes = r.p()?;
+            Carrier::Ellipsoid {
+                center,
+                axes,
+                semi_axes,
+            }
+        }
+        2 => {
+            let radius = positive(r.finite("the carrier radius")?, "the carrier radius")?;
+            let normals = r.points(points.len())?;
+            let local =
+                LocalCarrier::from_parts(points.to_vec(), normals, radius, Arc::clone(index));
+            Carrier::Local(local.ok_or("the local carrier has no usable normal")?)
+        }
+        t => return Err(format!("unknown carrier tag {t}")),
     })
 }
 

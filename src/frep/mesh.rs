@@ -97,7 +97,13 @@ pub fn mesh_solid(
         min: frame.forward(&domain.min),
         max: frame.forward(&domain.max),
     };
-    let field = SolidField { solid, frame };
+    // Refinement decides fixed-sign operands once per box of 8 cells.
+    let field = SolidField {
+        solid,
+        frame,
+        lattice: 8.0 / params.resolution as f64,
+        cache: Default::default(),
+    };
     let pp = PolygonizeParams {
         resolution: params.resolution,
         max_cells: params.max_cells,

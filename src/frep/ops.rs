@@ -154,6 +154,25 @@ pub fn r_union(a: f64, b: f64, alpha: f64) -> f64 {
     (a + b + r) / (1.0 + alpha)
 }
 
+/// `(u∪(a, b), ∂u/∂a, ∂u/∂b)` for finite `a`, `b`.
+fn r_union_partials(a: f64, b: f64, alpha: f64) -> (f64, f64, f64) {
+    let r = (a * a + b * b - 2.0 * alpha * a * b).max(0.0).sqrt();
+    let k = 1.0 / (1.0 + alpha);
+    if r == 0.0 {
+        return ((a + b) * k, k, k);
+    }
+    (
+        (a + b + r) * k,
+        (1.0 + (a - alpha * b) / r) * k,
+        (1.0 + (b - alpha * a) / r) * k,
+    )
+}
+
+/// `p·g + q·h`.
+fn combine(p: f64, g: Point3, q: f64, h: Point3) -> Point3 {
+    [0, 1, 2].map(|k| p * g[k] + q * h[k])
+}
+
 /// R-intersection: `−u∪(−a, −b)`.
 pub fn r_intersection(a: f64, b: f64, alpha: f64) -> f64 {
     -r_union(-a, -b, alpha)
@@ -238,6 +257,22 @@ impl Solid {
     /// `F` at each of `points` (all inside `region`), written to `out`. Field operands gather their
     /// spline centres once for the region.
     pub fn values(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        self.values_with(region, points, out, None);
+    }
+
+    /// [`Self::values`], or with `sign_only` (a cache) values that have the same sign and zero set as `F`
+    /// but cost less: an R-function operand whose sign is fixed on `region` (its bound) is not
+    /// evaluated but replaced by its value at the region's centre. The zero set of an R-function
+    /// depends only on where its operands vanish and their signs, so the result's signs and zero
+    /// set are unchanged; only operations that use magnitudes (blend, offset, morph) ask their
+    /// operands for exact values. What the polygonizer's grid corners use.
+    pub fn values_with(
+        &self,
+        region: &Aabb,
+        points: &[Point3],
+        out: &mut [f64],
+        sign_only: Option<&SignCache>,
+    ) {
         match self {
             Solid::Field(m) => {
                 let n = &m.normalization;
@@ -255,8 +290,8 @@ impl Solid {
             | Solid::Intersection(a, b, al)
             | Solid::Difference(a, b, al) => {
                 let mut second = vec![0.0; points.len()];
-                a.values(region, points, out);
-                b.values(region, points, &mut second);
+                operand(a, region, points, out, sign_only);
+                operand(b, region, points, &mut second, sign_only);
                 for (o, v) in out.iter_mut().zip(second) {
                     *o = match self {
                         Solid::Union(..) => r_union(*o, v, *al),
@@ -287,10 +322,10 @@ impl Solid {
             }
             Solid::Affine(a, map) => {
                 let pts: Vec<Point3> = points.iter().map(|p| map.apply(p)).collect();
-                a.values(&map.apply_box(region), &pts, out);
+                a.values_with(&map.apply_box(region), &pts, out, sign_only);
                 out.iter_mut().for_each(|o| *o *= map.gain);
             }
-            Solid::Shared(a) => a.values(region, points, out),
+            Solid::Shared(a) => a.values_with(region, points, out, sign_only),
             Solid::Morph(a, b, t, _) => {
                 let mut second = vec![0.0; points.len()];
                 a.values(region, points, out);
@@ -307,10 +342,79 @@ impl Solid {
         }
     }
 
+    /// `(F(x), ∇F(x))`: analytic through the operations and the fields (chain rule), central
+    /// differences on primitives and offsets.
+    pub fn value_gradient(&self, x: &Point3) -> (f64, Point3) {
+        match self {
+            Solid::Field(m) => {
+                let p = m.normalization.forward(x);
+                let g = m.rbf.gradient(&p);
+                (m.value(x), g.map(|c| -c))
+            }
+            Solid::Union(a, b, al)
+            | Solid::Intersection(a, b, al)
+            | Solid::Difference(a, b, al) => {
+                let ((u, gu), (mut v, mut gv)) = (a.value_gradient(x), b.value_gradient(x));
+                if matches!(self, Solid::Difference(..)) {
+                    v = -v;
+                    gv = gv.map(|c| -c);
+                }
+                let union = matches!(self, Solid::Union(..));
+                let s = if union { 1.0 } else { -1.0 };
+                let (f, da, db) = r_union_partials(s * u, s * v, *al);
+                (s * f, combine(da, gu, db, gv))
+            }
+            Solid::Blend(a, b, a0) => {
+                let ((u, gu), (v, gv)) = (a.value_gradient(x), b.value_gradient(x));
+                let (f, da, db) = r_union_partials(u, v, 0.0);
+                let (p, q) = (u / a0, v / a0);
+                let den = 1.0 + p * p + q * q;
+                let (dd_a, dd_b) = (-2.0 * p / (den * den), -2.0 * q / (den * den));
+                let d = displacement(u, v, *a0);
+                (f + d, combine(da + dd_a, gu, db + dd_b, gv))
+            }
+            Solid::Affine(a, map) => {
+                let (v, g) = a.value_gradient(&map.apply(x));
+                let mt = [0, 1, 2].map(|j| (0..3).map(|i| map.m[i][j] * g[i]).sum::<f64>());
+                (map.gain * v, mt.map(|c| map.gain * c))
+            }
+            Solid::Shared(a) => a.value_gradient(x),
+            Solid::Morph(a, b, t, _) => {
+                let ((u, gu), (v, gv)) = (a.value_gradient(x), b.value_gradient(x));
+                ((1.0 - t) * u + t * v, combine(1.0 - t, gu, *t, gv))
+            }
+            _ => {
+                let h = 1e-7 * (1.0 + norm(*x));
+                let mut pts = vec![*x];
+                push_stencil(x, h, &mut pts);
+                let v: Vec<f64> = pts.iter().map(|p| self.value(p)).collect();
+                (
+                    v[0],
+                    [v[1] - v[2], v[3] - v[4], v[5] - v[6]].map(|d| d / (2.0 * h)),
+                )
+            }
+        }
+    }
+
     /// Bound of `F` over `cell` (see the module doc).
     pub fn bound(&self, cell: &Aabb) -> Bound {
+        self.bound_with(cell, None)
+    }
+
+    /// [`Self::bound`], remembering field operands' bounds per box in `cache`.
+    pub fn bound_with(&self, cell: &Aabb, cache: Option<&SignCache>) -> Bound {
         let (c, h) = (cell.center(), 0.5 * cell.diagonal());
         match self {
+            Solid::Field(_) if cache.is_some() => {
+                let key = (
+                    std::ptr::from_ref::<Solid>(self) as usize,
+                    [0, 1, 2, 3, 4, 5]
+                        .map(|k| if k < 3 { cell.min[k] } else { cell.max[k - 3] }.to_bits()),
+                );
+                cached(&cache.unwrap_or_else(|| unreachable!()).bounds, key, || {
+                    self.bound_with(cell, None)
+                })
+            }
             Solid::Field(m) => {
                 let n = &m.normalization;
                 let nc = Aabb {
@@ -331,7 +435,7 @@ impl Solid {
             Solid::Union(a, b, al)
             | Solid::Intersection(a, b, al)
             | Solid::Difference(a, b, al) => {
-                let (x, mut y) = (a.bound(cell), b.bound(cell));
+                let (x, mut y) = (a.bound_with(cell, cache), b.bound_with(cell, cache));
                 let f: fn(f64, f64, f64) -> f64 = match self {
                     Solid::Union(..) => r_union,
                     _ => r_intersection,
@@ -348,7 +452,7 @@ impl Solid {
                 }
             }
             Solid::Blend(a, b, a0) => {
-                let (x, y) = (a.bound(cell), b.bound(cell));
+                let (x, y) = (a.bound_with(cell, cache), b.bound_with(cell, cache));
                 let ((mx, big_x), (my, big_y)) = (abs_range(x), abs_range(y));
                 Bound {
                     lo: r_union(x.lo, y.lo, 0.0) + displacement(big_x, big_y, *a0),
@@ -356,7 +460,7 @@ impl Solid {
                 }
             }
             Solid::Offset(a, d, _) => {
-                let grown = a.bound(&cell.inflated(2.0 * d.abs()));
+                let grown = a.bound_with(&cell.inflated(2.0 * d.abs()), cache);
                 if grown.lo > 0.0 {
                     Bound::INSIDE
                 } else if grown.hi < 0.0 {
@@ -366,16 +470,16 @@ impl Solid {
                 }
             }
             Solid::Affine(a, map) => {
-                let b = a.bound(&map.apply_box(cell));
+                let b = a.bound_with(&map.apply_box(cell), cache);
                 let (p, q) = (map.gain * b.lo, map.gain * b.hi);
                 Bound {
                     lo: p.min(q),
                     hi: p.max(q),
                 }
             }
-            Solid::Shared(a) => a.bound(cell),
+            Solid::Shared(a) => a.bound_with(cell, cache),
             Solid::Morph(a, b, t, _) => {
-                let (x, y) = (a.bound(cell), b.bound(cell));
+                let (x, y) = (a.bound_with(cell, cache), b.bound_with(cell, cache));
                 let mix = |p: f64, q: f64| match (*t == 0.0, *t == 1.0) {
                     (true, _) => p,
                     (_, true) => q,
@@ -428,6 +532,113 @@ impl Solid {
     }
 }
 
+/// Decisions of single-point sign-only evaluation per (operand, lattice box): the constant that
+/// replaces an operand of fixed sign on the box, or `None` (evaluate it). Sharded maps shared by
+/// the polygonizer's threads; a miss costs the operand's bound and one evaluation, a hit saves
+/// one evaluation of the operand.
+/// Also the bounds of field operands per box (the polygonizer asks for a tile's bound, then its
+/// values; a field's bound costs ~10 evaluations far from its data).
+#[derive(Default)]
+pub struct SignCache {
+    fixed: Sharded<(usize, [i64; 3]), Option<f64>>,
+    bounds: Sharded<(usize, [u64; 6]), Bound>,
+}
+
+type Sharded<K, V> = [std::sync::Mutex<std::collections::HashMap<K, V>>; 16];
+
+fn cached<K: std::hash::Hash + Eq, V: Copy>(
+    shards: &Sharded<K, V>,
+    key: K,
+    make: impl FnOnce() -> V,
+) -> V {
+    use std::hash::{BuildHasher, BuildHasherDefault};
+    let h =
+        BuildHasherDefault::<std::collections::hash_map::DefaultHasher>::default().hash_one(&key);
+    let shard = &shards[(h % 16) as usize];
+    if let Some(v) = shard.lock().ok().and_then(|m| m.get(&key).copied()) {
+        return v;
+    }
+    let v = make();
+    if let Ok(mut m) = shard.lock() {
+        m.insert(key, v);
+    }
+    v
+}
+
+impl SignCache {
+    fn get_or(&self, key: (usize, [i64; 3]), make: impl FnOnce() -> Option<f64>) -> Option<f64> {
+        cached(&self.fixed, key, make)
+    }
+}
+
+/// The constant that may replace `s` on `region` (fixed sign), or `None`.
+fn fixed_sign_value(s: &Solid, region: &Aabb, cache: Option<&SignCache>) -> Option<f64> {
+    let b = s.bound_with(region, cache);
+    if b.may_contain_zero() {
+        return None;
+    }
+    let v = s.value(&region.center());
+    // The bound's sign, should the centre's value round to 0.
+    Some(if b.lo > 0.0 {
+        v.max(f64::MIN_POSITIVE)
+    } else {
+        v.min(-f64::MIN_POSITIVE)
+    })
+}
+
+impl Solid {
+    /// `F(x)` with the same sign and zero set (see [`Solid::values_with`]): R-function operands of
+    /// fixed sign on the lattice box `cell` (index `key`, edge `edge`) are replaced by a constant
+    /// decided once per box in `cache`.
+    pub fn value_sign_only(
+        &self,
+        x: &Point3,
+        cell: &Aabb,
+        key: [i64; 3],
+        cache: &SignCache,
+    ) -> f64 {
+        match self {
+            Solid::Union(a, b, al)
+            | Solid::Intersection(a, b, al)
+            | Solid::Difference(a, b, al) => {
+                let mut v = [0.0; 2];
+                for (o, s) in v.iter_mut().zip([a, b]) {
+                    let id = std::ptr::from_ref::<Solid>(s) as usize;
+                    *o = match cache.get_or((id, key), || fixed_sign_value(s, cell, Some(cache))) {
+                        Some(c) => c,
+                        None => s.value_sign_only(x, cell, key, cache),
+                    };
+                }
+                match self {
+                    Solid::Union(..) => r_union(v[0], v[1], *al),
+                    Solid::Intersection(..) => r_intersection(v[0], v[1], *al),
+                    _ => r_intersection(v[0], -v[1], *al),
+                }
+            }
+            Solid::Shared(a) => a.value_sign_only(x, cell, key, cache),
+            _ => self.value(x),
+        }
+    }
+}
+
+/// An R-function's operand at `points`: with `sign_only` and a fixed sign on `region`, its value
+/// at the centre (see [`Solid::values_with`]); else evaluated.
+fn operand(
+    s: &Solid,
+    region: &Aabb,
+    points: &[Point3],
+    out: &mut [f64],
+    sign_only: Option<&SignCache>,
+) {
+    if sign_only.is_some()
+        && let Some(v) = fixed_sign_value(s, region, sign_only)
+    {
+        out.fill(v);
+        return;
+    }
+    s.values_with(region, points, out, sign_only);
+}
+
 fn union_box(a: Option<Aabb>, b: Option<Aabb>) -> Option<Aabb> {
     match (a, b) {
         (Some(mut p), Some(q)) => {
@@ -465,6 +676,11 @@ pub struct SolidField<'a> {
     pub solid: &'a Solid,
     /// Input units ↔ the polygonizer's frame.
     pub frame: crate::geometry::Normalization,
+    /// Edge of the lattice boxes on which single-point evaluations decide fixed-sign operands
+    /// (the polygonizer's frame; 0 = always evaluate exactly).
+    pub lattice: f64,
+    /// Those decisions.
+    pub cache: SignCache,
 }
 
 impl SolidField<'_> {
@@ -477,28 +693,43 @@ impl SolidField<'_> {
 }
 
 impl ScalarField for SolidField<'_> {
+    /// Sign-only (same signs and zero set as `F`, see [`Solid::value_sign_only`]): what the root
+    /// refinement along grid edges needs.
     fn value(&self, p: &Point3) -> f64 {
-        -self.solid.value(&self.frame.inverse(p)) * self.frame.scale
+        let x = self.frame.inverse(p);
+        if self.lattice <= 0.0 {
+            return -self.solid.value(&x) * self.frame.scale;
+        }
+        let key = p.map(|c| (c / self.lattice).floor() as i64);
+        let lo = key.map(|k| k as f64 * self.lattice);
+        let cell = self.to_input(&Aabb {
+            min: lo,
+            max: lo.map(|c| c + self.lattice),
+        });
+        -self.solid.value_sign_only(&x, &cell, key, &self.cache) * self.frame.scale
     }
 
     fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
         let pts: Vec<Point3> = points.iter().map(|p| self.frame.inverse(p)).collect();
-        self.solid.values(&self.to_input(region), &pts, out);
+        self.solid
+            .values_with(&self.to_input(region), &pts, out, Some(&self.cache));
         for o in out.iter_mut() {
             *o = -*o * self.frame.scale;
         }
     }
 
     fn gradient(&self, p: &Point3) -> Point3 {
-        let h = 1e-6;
-        let mut pts = vec![*p];
-        push_stencil(p, h, &mut pts);
-        let mut v = vec![0.0; 7];
-        self.values_in(&Aabb::from_points(&pts), &pts, &mut v);
-        [v[1] - v[2], v[3] - v[4], v[5] - v[6]].map(|d| d / (2.0 * h))
+        // ∇_p [−F(N⁻¹ p) · s] = −∇F (N⁻¹ scales by 1/s).
+        self.solid
+            .value_gradient(&self.frame.inverse(p))
+            .1
+            .map(|c| -c)
     }
 
     fn may_contain_zero(&self, cell: &Aabb) -> bool {
-        self.solid.bound(&self.to_input(cell)).may_contain_zero()
+        let cache = (self.lattice > 0.0).then_some(&self.cache);
+        self.solid
+            .bound_with(&self.to_input(cell), cache)
+            .may_contain_zero()
     }
 }

@@ -428,6 +428,16 @@ impl JobManager {
     /// ([`crate::pipeline::run`]).
     fn reconstruct_job(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
         let view = job.view();
+        if [super::volume::COMPOSITION, super::volume::MORPH].contains(&view.input.format.as_str())
+        {
+            return super::volume::run_volume_job(&self.store, job.id, progress).map_err(|e| {
+                if progress.cancelled() || e.code == ErrorKind::Cancelled.code() {
+                    JobError::Stopped
+                } else {
+                    JobError::Failed(e)
+                }
+            });
+        }
         let options = self
             .store
             .load_options(job.id)

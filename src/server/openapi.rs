@@ -40,6 +40,8 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(rec::mesh_obj))
         .routes(routes!(rec::job_report))
         .routes(routes!(rec::job_field))
+        .routes(routes!(super::routes::volume::create_composition))
+        .routes(routes!(super::routes::volume::create_morph))
         .routes(routes!(meta::health))
         .routes(routes!(meta::openapi_json))
         .routes(routes!(meta::index))

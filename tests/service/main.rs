@@ -10,3 +10,4 @@ mod load;
 #[path = "../server_common/mod.rs"]
 mod server_common;
 mod submit;
+mod volume;
