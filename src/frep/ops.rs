@@ -151,7 +151,16 @@ pub fn r_union(a: f64, b: f64, alpha: f64) -> f64 {
         return a;
     }
     let r = (a * a + b * b - 2.0 * alpha * a * b).max(0.0).sqrt();
-    (a + b + r) / (1.0 + alpha)
+    let u = (a + b + r) / (1.0 + alpha);
+    // The sign law of the R-union (positive iff an operand is), which rounding in `a + b + r` can
+    // break when one operand is far smaller than the other.
+    if a > 0.0 || b > 0.0 {
+        u.max(f64::MIN_POSITIVE)
+    } else if a < 0.0 && b < 0.0 {
+        u.min(-f64::MIN_POSITIVE)
+    } else {
+        u
+    }
 }
 
 /// `(u∪(a, b), ∂u/∂a, ∂u/∂b)` for finite `a`, `b`.

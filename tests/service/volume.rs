@@ -55,7 +55,7 @@ fn the_command_line_saves_combines_morphs_and_voxelizes_fields() {
             "c.json",
             "-q",
             "--resolution",
-            "64",
+            "128",
         ],
     );
     assert_eq!(code, 0, "{err}");
@@ -63,7 +63,11 @@ fn the_command_line_saves_combines_morphs_and_voxelizes_fields() {
     let r: serde_json::Value =
         serde_json::from_slice(&std::fs::read(d.join("c.json")).unwrap()).unwrap();
     assert_eq!(r["mesh"]["components"], 1);
-    assert!(r["blocks_active"].as_u64().unwrap() < r["blocks_total"].as_u64().unwrap());
+    let (active, total) = (
+        r["blocks_active"].as_u64().unwrap(),
+        r["blocks_total"].as_u64().unwrap(),
+    );
+    assert!(active < total, "{active} of {total} blocks evaluated");
     // Bad input: one line, non-zero exit, no output.
     let corrupt = {
         let mut b = std::fs::read(d.join("s.field")).unwrap();
