@@ -256,7 +256,7 @@ fn arguments(
     args: &[Expr],
     col: usize,
     loader: &mut Loader,
-) -> Result<(Vec<Box<Solid>>, Vec<f64>), FrepError> {
+) -> Result<(Vec<Solid>, Vec<f64>), FrepError> {
     let (solids, nums, expected) = signature(name).ok_or_else(|| FrepError::UnknownOperation {
         name: name.to_string(),
         column: col,
@@ -275,7 +275,7 @@ fn arguments(
         if let Expr::Num(v, _) = a {
             return Err(arity(format!("the number {v} where a solid is expected")));
         }
-        children.push(Box::new(build(a, loader)?));
+        children.push(build(a, loader)?);
     }
     let mut n = Vec::with_capacity(args.len() - solids);
     for a in &args[solids..] {
@@ -312,7 +312,7 @@ fn build_call(
         }
     };
     let mut kids = children.into_iter();
-    let mut next = || kids.next().expect("arity checked");
+    let mut next = || Box::new(kids.next().expect("arity checked"));
     match name {
         "sphere" => Some(Solid::Sphere(
             [n[0], n[1], n[2]],
