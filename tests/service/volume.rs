@@ -144,9 +144,11 @@ fn the_command_line_saves_combines_morphs_and_voxelizes_fields() {
             .iter()
             .map(|v| v[2])
             .fold(f64::INFINITY, f64::min);
-        // The obstacle covers z < 0.3 of the sphere's box [0.1, 0.9]³: nothing below it.
+        // The obstacle covers z < 0.3 of the sphere's box [0.1, 0.9]³: nothing below it (up to the
+        // root finding's tolerance at the crease: a tenth of a cell, 2·10⁻³; measured up to 1.4·10⁻³
+        // on the anisotropically aligned torus).
         assert!(
-            z_min > 0.3 - 1e-6,
+            z_min > 0.3 - 2e-3,
             "frame {k} enters the obstacle: z = {z_min}"
         );
     }
