@@ -13,6 +13,7 @@ pub mod clean;
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod error;
+pub mod frep;
 pub mod geometry;
 pub mod io;
 pub mod linalg;

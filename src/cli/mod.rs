@@ -4,6 +4,7 @@
 mod bench;
 mod compare;
 mod curve;
+mod frep;
 mod generate;
 mod http;
 pub mod progress;
@@ -55,6 +56,14 @@ pub enum Command {
     Generate(generate::GenerateArgs),
     /// 2D implicit curves workbench: fit constraints (x y [nx ny] [value]) and write an SVG + JSON report.
     Curve(curve::CurveArgs),
+    /// Inspect a saved field (`reconstruct --save-field`): `field info FILE`.
+    Field(frep::FieldArgs),
+    /// Mesh an expression over saved fields and primitives (union, intersection, difference, blend, offset, …).
+    Csg(frep::CsgArgs),
+    /// Metamorphosis A → B: meshed frames with their topology, an animated GLB and a report.
+    Morph(frep::MorphArgs),
+    /// Sample a field or expression on a grid: VTK XML ImageData (.vti) or NRRD, float32, F >= 0 inside.
+    Voxelize(frep::VoxelizeArgs),
     /// Run a benchmark and print a table (`table1`: the seed's Table 1; `scaling`: N = 10k..300k).
     Bench(bench::BenchArgs),
     /// Run the HTTP service: REST API, job queue, WebGL viewer at `/`.
@@ -96,6 +105,10 @@ where
         Command::Compare(a) => compare::run(&a),
         Command::Generate(a) => generate::run(&a),
         Command::Bench(a) => bench::run(&a),
+        Command::Field(a) => frep::run_field(&a),
+        Command::Csg(a) => frep::run_csg(&a),
+        Command::Morph(a) => frep::run_morph(&a),
+        Command::Voxelize(a) => frep::run_voxelize(&a),
         Command::Curve(a) => curve::run(&a),
         #[cfg(feature = "server")]
         Command::Serve(a) => serve::run(&a),

@@ -19,6 +19,10 @@ pub struct ReconstructArgs {
     /// Write the JSON report here.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// Also write the fitted implicit function here (`.field`, see docs/volume-modelling.md; CSRBF
+    /// only): operand of `rbfsurf csg`, `morph`, `voxelize`.
+    #[arg(long, value_name = "FILE")]
+    pub save_field: Option<PathBuf>,
     /// Reconstruction parameters.
     #[command(flatten)]
     pub options: ReconOptions,
@@ -33,7 +37,8 @@ pub struct ReconstructArgs {
 pub fn run(a: &ReconstructArgs) -> Result<()> {
     let params = ReconParams::try_from(&a.options)?;
     let format = MeshFormat::from_path(&a.output)?;
-    for out in std::iter::once(&a.output).chain(a.report.as_ref()) {
+    let outputs = [Some(&a.output), a.report.as_ref(), a.save_field.as_ref()];
+    for out in outputs.into_iter().flatten() {
         let dir = out.parent().filter(|d| !d.as_os_str().is_empty());
         if let Some(d) = dir
             && !d.is_dir()
@@ -56,6 +61,7 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         mesh: &a.output,
         format,
         report: a.report.as_deref(),
+        field: a.save_field.as_deref(),
     };
     let progress = BarProgress::new(a.quiet);
     let summary = pipeline::run(

@@ -15,6 +15,7 @@ mod budget;
 mod e57;
 mod error;
 mod glb;
+mod glb_anim;
 mod las;
 mod obj;
 mod off;
@@ -32,6 +33,7 @@ use std::path::Path;
 pub use budget::{PointCountHint, peek_point_count, reader_peak_mib};
 pub use error::IoError;
 pub use glb::{decode_glb, encode_glb, encode_glb_with, glb_crs};
+pub use glb_anim::encode_animated_glb;
 pub use write::{write_atomic, write_mesh, write_mesh_with, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};

@@ -97,20 +97,21 @@ pub fn fit_field(
     };
     let carrier_kind = carrier.kind();
     let carrier_bounds = carrier.zero_set_bounds();
-    let field = RbfField {
+    let field = Arc::new(RbfField {
         correction,
         kernel: params.kernel,
         carrier,
         carrier_index: index,
         carrier_radius: support.radius,
         finest_support: support.radius,
-    };
+    });
     let t = Instant::now();
-    let residual = residual_at(&field, &points);
+    let residual = residual_at(field.as_ref(), &points);
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         far_field,
-        field: Box::new(field),
+        field: Arc::clone(&field) as Arc<dyn crate::polygonize::ScalarField + Send>,
+        rbf: Some(field),
         method: Method::Csrbf,
         support_radius: support.radius,
         carrier: Some(carrier_kind),

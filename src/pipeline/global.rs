@@ -34,28 +34,29 @@ pub(super) fn fit_global(
     let t = Instant::now();
     let vp = VariationalParams::default();
     let normals = clean.normals.as_deref();
-    let (field, matrix): (Box<dyn ScalarField + Send>, MatrixReport) = match params.method {
-        Method::Mls => (
-            Box::new(fit_mls_3d(&points, normals, &vp)?),
-            MatrixReport::default(),
-        ),
-        _ => {
-            let f = fit_variational_3d(&points, normals, &vp)?;
-            let n = f.fit.info.unknowns;
-            let dense = MatrixReport {
-                n,
-                nnz: n * n,
-                bandwidth: n.saturating_sub(1),
-                profile_values: n * (n + 1) / 2,
-                dense_values: n * n,
-                factor_values: n * n,
-                solver_used: crate::report::SolversUsed::one("dense-lblt"),
-                levels: Vec::new(),
-                blocks: 1,
-            };
-            (Box::new(f), dense)
-        }
-    };
+    let (field, matrix): (std::sync::Arc<dyn ScalarField + Send>, MatrixReport) =
+        match params.method {
+            Method::Mls => (
+                std::sync::Arc::new(fit_mls_3d(&points, normals, &vp)?),
+                MatrixReport::default(),
+            ),
+            _ => {
+                let f = fit_variational_3d(&points, normals, &vp)?;
+                let n = f.fit.info.unknowns;
+                let dense = MatrixReport {
+                    n,
+                    nnz: n * n,
+                    bandwidth: n.saturating_sub(1),
+                    profile_values: n * (n + 1) / 2,
+                    dense_values: n * n,
+                    factor_values: n * n,
+                    solver_used: crate::report::SolversUsed::one("dense-lblt"),
+                    levels: Vec::new(),
+                    blocks: 1,
+                };
+                (std::sync::Arc::new(f), dense)
+            }
+        };
     timings.factor = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let residual = residual_at(field.as_ref(), &points);
@@ -63,6 +64,7 @@ pub(super) fn fit_global(
     Ok(FittedField {
         far_field: None,
         field,
+        rbf: None,
         method: params.method,
         support_radius: 4.0 * support.spacing,
         carrier: None,

@@ -32,7 +32,9 @@ pub struct Reconstruction {
 /// A solved field with everything measured on the way.
 pub struct FittedField {
     /// The implicit field, normalised units.
-    pub field: Box<dyn ScalarField + Send>,
+    pub field: std::sync::Arc<dyn ScalarField + Send>,
+    /// The same field as a CSRBF fit (what `--save-field` writes); `None` for the global methods.
+    pub rbf: Option<std::sync::Arc<crate::rbf::RbfField>>,
     /// The fit that ran.
     pub method: Method,
     /// Support radius (CSRBF) or the margin scale of a global method, normalised units.
@@ -80,6 +82,17 @@ pub fn reconstruct(
     params: &ReconParams,
     progress: &dyn Progress,
 ) -> Result<Reconstruction, ReconError> {
+    reconstruct_keeping_field(cloud, params, progress).map(|(r, _)| r)
+}
+
+/// [`reconstruct`], also returning the fitted field as a [`crate::frep::FieldModel`] (input
+/// units ↔ normalised units, data points, index settings) when the method is CSRBF: what
+/// `--save-field` writes. The global methods give `None`.
+pub fn reconstruct_keeping_field(
+    cloud: &PointCloud,
+    params: &ReconParams,
+    progress: &dyn Progress,
+) -> Result<(Reconstruction, Option<crate::frep::FieldModel>), ReconError> {
     reconstruct_inner(cloud, params, progress).map_err(|e| {
         if e.is_cancelled() {
             ReconError::Cancelled
@@ -116,7 +129,7 @@ fn reconstruct_inner(
     cloud: &PointCloud,
     params: &ReconParams,
     progress: &dyn Progress,
-) -> Result<Reconstruction, ReconError> {
+) -> Result<(Reconstruction, Option<crate::frep::FieldModel>), ReconError> {
     let start = Instant::now();
     params.validate()?;
     check_scale(cloud.points.len() as u64, params.max_memory_mib)?;
@@ -159,7 +172,14 @@ fn reconstruct_inner(
         polygonize,
         attributes,
     };
-    Ok(Reconstruction { mesh, report })
+    let field = fit.rbf.map(|rbf| crate::frep::FieldModel {
+        rbf,
+        normalization: fit.normalization,
+        points: fit.points,
+        index: params.index,
+        leaf_size: params.leaf_size,
+    });
+    Ok((Reconstruction { mesh, report }, field))
 }
 
 /// Colours the vertices of `mesh` (input units) from the fitted points' colour values, blended

@@ -48,6 +48,8 @@ pub struct RunOutput<'a> {
     pub format: MeshFormat,
     /// The JSON report, when wanted.
     pub report: Option<&'a Path>,
+    /// The fitted field in the `.field` format ([`crate::frep::format`]), when wanted (CSRBF only).
+    pub field: Option<&'a Path>,
 }
 
 /// What a finished run produced (the files are written).
@@ -121,11 +123,24 @@ pub fn run(
         }
     };
     let read_s = start.elapsed().as_secs_f64();
-    let mut rec = super::reconstruct(&cloud, params, progress).map_err(recon_err)?;
+    if output.field.is_some() && params.method != crate::params::Method::Csrbf {
+        return Err(recon_err(ReconError::Params(crate::params::ParamError {
+            name: "method",
+            value: params.method.name().to_string(),
+            expected: "csrbf when saving the field (--save-field): the global methods have no saved form",
+        })));
+    }
+    let (mut rec, field) =
+        super::reconstruct_keeping_field(&cloud, params, progress).map_err(recon_err)?;
     drop(cloud);
     super::check_cancel(progress).map_err(recon_err)?;
     progress.stage(Stage::Write);
     let t = Instant::now();
+    if let (Some(path), Some(field)) = (output.field, &field) {
+        let bytes = crate::frep::format::encode(field);
+        write_atomic(path, &bytes).map_err(RunError::Write)?;
+    }
+    drop(field);
     let meta = MeshMeta {
         crs: rec.report.attributes.crs.clone(),
     };
@@ -144,6 +159,9 @@ pub fn run(
         if let Err(e) = write_atomic(path, &json) {
             // The mesh without its report would be half a result: take it back.
             let _ = std::fs::remove_file(output.mesh);
+            if let Some(f) = output.field {
+                let _ = std::fs::remove_file(f);
+            }
             return Err(RunError::Write(e));
         }
     }

@@ -425,6 +425,18 @@ impl LocalCarrier {
             .iter()
             .map(|n| normalized(*n).unwrap_or([0.0; 3]))
             .collect();
+        Self::from_parts(points.to_vec(), normals, radius, index)
+    }
+
+    /// Rebuild from saved parts: the points, their unit normals exactly as [`Self::normals`] gave
+    /// them (not renormalised, so a loaded carrier evaluates bit for bit like the saved one), the
+    /// radius and an index over `points`. `None` when no normal is usable or the lengths differ.
+    pub fn from_parts(
+        points: Vec<Point3>,
+        normals: Vec<Point3>,
+        radius: f64,
+        index: Arc<dyn SpatialIndex + Send>,
+    ) -> Option<Self> {
         let valid_ids: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| normals[i as usize] != [0.0; 3])
             .collect();
@@ -433,9 +445,9 @@ impl LocalCarrier {
         }
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
         let valid_tree = KdTree::build(&valid_points).ok()?;
-        let winding = winding_grid(points, &normals, &valid_tree, &valid_ids, radius);
+        let winding = winding_grid(&points, &normals, &valid_tree, &valid_ids, radius);
         Some(LocalCarrier {
-            points: points.to_vec(),
+            points,
             normals,
             radius,
             index,
@@ -444,6 +456,16 @@ impl LocalCarrier {
             winding,
             far_field: Arc::new(AtomicBool::new(true)),
         })
+    }
+
+    /// The blended points, normalised units.
+    pub fn points(&self) -> &[Point3] {
+        &self.points
+    }
+
+    /// Their unit normals (zero where unusable).
+    pub fn normals(&self) -> &[Point3] {
+        &self.normals
     }
 
     /// Flip every normal (used when the input's normals turn out to point inwards).
@@ -460,6 +482,11 @@ impl LocalCarrier {
     /// blend everywhere, which continues an open scan's sheet instead of closing it.
     pub fn far_field_switch(&self) -> Arc<AtomicBool> {
         Arc::clone(&self.far_field)
+    }
+
+    /// Whether the winding far field is on (see [`Self::far_field_switch`]).
+    pub fn far_field_enabled(&self) -> bool {
+        self.far_field.load(Ordering::Relaxed)
     }
 
     /// Whether the normals point inwards: the winding number integrates to the enclosed volume

@@ -428,6 +428,16 @@ impl JobManager {
     /// ([`crate::pipeline::run`]).
     fn reconstruct_job(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
         let view = job.view();
+        if [super::volume::COMPOSITION, super::volume::MORPH].contains(&view.input.format.as_str())
+        {
+            return super::volume::run_volume_job(&self.store, job.id, progress).map_err(|e| {
+                if progress.cancelled() || e.code == ErrorKind::Cancelled.code() {
+                    JobError::Stopped
+                } else {
+                    JobError::Failed(e)
+                }
+            });
+        }
         let options = self
             .store
             .load_options(job.id)
@@ -445,10 +455,13 @@ impl JobManager {
         };
         let mesh = self.store.file(job.id, "mesh.glb");
         let report = self.store.file(job.id, "report.json");
+        // The fitted field too (`GET …/field`), when the method has a saved form.
+        let field = self.store.file(job.id, "fitted.field");
         let output = RunOutput {
             mesh: &mesh,
             format: MeshFormat::Glb,
             report: Some(&report),
+            field: (params.method == crate::params::Method::Csrbf).then_some(field.as_path()),
         };
         let source = PointSource::Bytes {
             data: &data,

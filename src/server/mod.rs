@@ -2,7 +2,8 @@
 //! queue, server-sent progress, an embedded WebGL viewer and an OpenAPI document.
 //!
 //! Layout: [`config`] (limits), [`error`] (JSON errors), [`model`] (the job record), [`jobs`]
-//! (queue, workers, progress, recovery), [`store`] (files under the data directory), [`routes`] (handlers), [`openapi`].
+//! (queue, workers, progress, recovery), [`store`] (files under the data directory), [`routes`] (handlers), [`openapi`],
+//! [`volume`] (composition and morph jobs over finished jobs' fields).
 //! The server only calls the library (`io`, `params`, `reconstruct`); it adds no numerics.
 //! Design: the HTTP API section of the design notes; the seed's online server with browser view.
 
@@ -13,6 +14,7 @@ pub mod model;
 pub mod openapi;
 pub mod routes;
 pub mod store;
+pub mod volume;
 
 use axum::Router;
 use axum::extract::DefaultBodyLimit;

@@ -4,6 +4,7 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+mod frep;
 mod large;
 mod open_scans;
 mod parser_soak;

@@ -158,6 +158,7 @@ fn run_to(input: &Path, dir: &Path, name: &str, format: MeshFormat) -> rbfsurf::
         mesh: &mesh,
         format,
         report: Some(&report),
+        field: None,
     };
     let p = ReconParams::default();
     run(

@@ -12,3 +12,4 @@ mod scanner_files;
 #[path = "../server_common/mod.rs"]
 mod server_common;
 mod submit;
+mod volume;

@@ -118,7 +118,7 @@ fn area_weighted_normals(mesh: &TriMesh) -> Vec<Point3> {
     sums
 }
 
-fn push_view(
+pub(super) fn push_view(
     root: &mut json::Root,
     buf: json::Index<json::Buffer>,
     off: usize,
@@ -136,7 +136,7 @@ fn push_view(
     })
 }
 
-fn push_accessor(
+pub(super) fn push_accessor(
     root: &mut json::Root,
     view: json::Index<json::buffer::View>,
     count: usize,
@@ -225,10 +225,10 @@ pub fn encode_glb_with(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoErr
 }
 
 /// Per-axis (min, max) of f32 positions.
-type Bounds = ([f32; 3], [f32; 3]);
+pub(super) type Bounds = ([f32; 3], [f32; 3]);
 
 /// Positions as f32 with their exact per-axis (min, max); errors if a coordinate overflows f32.
-fn f32_positions(mesh: &TriMesh) -> Result<(Vec<[f32; 3]>, Bounds), IoError> {
+pub(super) fn f32_positions(mesh: &TriMesh) -> Result<(Vec<[f32; 3]>, Bounds), IoError> {
     let pos: Vec<[f32; 3]> = mesh.vertices.iter().map(|p| p.map(|c| c as f32)).collect();
     if let Some(v) = pos.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         let p = mesh.vertices[v];
@@ -355,7 +355,11 @@ fn document(l: &Layout) -> json::Root {
 
 /// GLB container: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
 /// `meta.crs`, when present, is added as `asset.extras.crs` (a string).
-fn container(root: &json::Root, meta: &MeshMeta, bin: Vec<u8>) -> Result<Vec<u8>, IoError> {
+pub(super) fn container(
+    root: &json::Root,
+    meta: &MeshMeta,
+    bin: Vec<u8>,
+) -> Result<Vec<u8>, IoError> {
     let mut value = json::serialize::to_value(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
     if let (Some(crs), Some(asset)) = (&meta.crs, value.get_mut("asset")) {
         asset["extras"] = serde_json::json!({ "crs": crs });

@@ -1,7 +1,9 @@
 // rbfsurf viewer: upload a point file, follow the job by server-sent events, then show the
 // returned binary glTF with plain WebGL (no libraries, works offline). The GLB reader handles the
 // files rbfsurf writes: one indexed triangle primitive with POSITION (+ NORMAL, + COLOR_0 vertex
-// colours, linear RGB in the file, shown sRGB-encoded; orange when the mesh has none).
+// colours, linear RGB in the file, shown sRGB-encoded; orange when the mesh has none) per mesh; a
+// morph's GLB (one mesh per frame node, a STEP animation) is played frame by frame. Two finished
+// jobs can be composed (union, intersection, difference, blend) or morphed through the volume API.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -87,6 +89,7 @@ function follow(id) {
 
 async function finished(v) {
   $("go").disabled = !chosen;
+  refreshJobs();
   if (v.status !== "succeeded") {
     const err = v.error ? `${v.error.code}: ${v.error.message}` : v.status;
     setStatus(`Job ${v.status}: ${err}`, true);
@@ -111,6 +114,19 @@ async function finished(v) {
 
 function showStats(r) {
   if (!r) return;
+  if (r.frames) {
+    $("stats").innerHTML = r.frames.map((f) => `<tr><td>t = ${f.t.toFixed(2)}</td><td>${f.triangles} triangles, ` +
+      `${f.components} comp., genus ${f.genus ?? "-"}, watertight ${f.watertight}</td></tr>`).join("");
+    return;
+  }
+  if (!r.input) {
+    const m = r.mesh;
+    $("stats").innerHTML = [["expression", r.expression], ["triangles", m.triangles], ["components", m.components],
+      ["watertight", m.watertight], ["genus", m.genus], ["blocks evaluated", `${r.blocks_active} of ${r.blocks_total}`],
+      ["total time", r.timings_s.total.toFixed(2) + " s"]]
+      .map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+    return;
+  }
   const rows = [
     ["points used", `${r.input.used} of ${r.input.points}`],
     ["triangles", r.mesh.triangles], ["vertices", r.mesh.vertices],
@@ -137,7 +153,6 @@ function parseGlb(buf) {
     off = start + len;
   }
   if (!json || !bin) throw new Error("GLB without JSON or BIN chunk");
-  const prim = json.meshes[0].primitives[0];
   const read = (index, comps) => {
     const acc = json.accessors[index];
     const view = json.bufferViews[acc.bufferView];
@@ -157,11 +172,23 @@ function parseGlb(buf) {
     }
     return out;
   };
-  const positions = read(prim.attributes.POSITION, 3);
-  const indices = Uint32Array.from(read(prim.indices, 1));
-  const normals = prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : vertexNormals(positions, indices);
-  const colored = prim.attributes.COLOR_0 !== undefined;
-  return { positions, normals, indices, colored, colors: colored ? vertexColors(json, prim, read, positions.length / 3) : null };
+  const meshOf = (mesh) => {
+    const prim = mesh.primitives[0];
+    const positions = read(prim.attributes.POSITION, 3);
+    const indices = Uint32Array.from(read(prim.indices, 1));
+    const normals = prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : vertexNormals(positions, indices);
+    const colored = prim.attributes.COLOR_0 !== undefined;
+    return { positions, normals, indices, colored, colors: colored ? vertexColors(json, prim, read, positions.length / 3) : null };
+  };
+  const first = meshOf(json.meshes[0]);
+  // A morph: one node per frame (scene order), shown one at a time by a STEP animation.
+  if (json.animations && json.animations.length && json.meshes.length > 1) {
+    const nodes = json.scenes[json.scene || 0].nodes.map((n) => json.nodes[n]);
+    first.frames = nodes.map((n) => (n.mesh === 0 ? first : meshOf(json.meshes[n.mesh])));
+    const times = read(json.animations[0].samplers[0].input, 1);
+    first.frameSeconds = times.length > 1 ? times[1] - times[0] : 0.25;
+  }
+  return first;
 }
 
 // COLOR_0 as sRGB-encoded floats for display (the file holds linear RGB, VEC3 or VEC4; float or
@@ -218,21 +245,34 @@ function createViewer(canvas) {
   const state = { yaw: 0.6, pitch: 0.35, dist: 3.4, count: 0, center: [0, 0, 0], scale: 1 };
   let buffers = null;
 
+  let frames = [], timer = null;
   function setMesh(m) {
+    const list = m.frames || [m];
     let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    for (let i = 0; i < m.positions.length; i += 3)
-      for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], m.positions[i + d]); hi[d] = Math.max(hi[d], m.positions[i + d]); }
+    for (const f of list)
+      for (let i = 0; i < f.positions.length; i += 3)
+        for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], f.positions[i + d]); hi[d] = Math.max(hi[d], f.positions[i + d]); }
     state.center = lo.map((l, d) => (l + hi[d]) / 2);
     state.scale = 2 / Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-30);
     const mk = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
-    let colors = m.colors;
-    if (!colors) {
-      colors = new Float32Array(m.positions.length);
-      for (let i = 0; i < colors.length; i += 3) colors.set([0.88, 0.53, 0.23], i);
+    const colorsOf = (f) => {
+      if (f.colors) return f.colors;
+      const c = new Float32Array(f.positions.length);
+      for (let i = 0; i < c.length; i += 3) c.set([0.88, 0.53, 0.23], i);
+      return c;
+    };
+    frames = list.map((f) => ({ pos: mk(gl.ARRAY_BUFFER, f.positions), nrm: mk(gl.ARRAY_BUFFER, new Float32Array(f.normals)),
+      col: mk(gl.ARRAY_BUFFER, colorsOf(f)), idx: mk(gl.ELEMENT_ARRAY_BUFFER, f.indices), count: f.indices.length }));
+    if (timer) clearInterval(timer);
+    timer = null;
+    let k = 0;
+    const show = () => { buffers = frames[k]; state.count = buffers.count; };
+    show();
+    if (frames.length > 1) {
+      // Play the morph: each frame for its duration, a pause at both ends.
+      timer = setInterval(() => { k = (k + 1) % (frames.length + 2); if (k < frames.length) { show(); draw(); } },
+        1000 * (m.frameSeconds || 0.25));
     }
-    buffers = { pos: mk(gl.ARRAY_BUFFER, m.positions), nrm: mk(gl.ARRAY_BUFFER, new Float32Array(m.normals)),
-                col: mk(gl.ARRAY_BUFFER, colors), idx: mk(gl.ELEMENT_ARRAY_BUFFER, m.indices) };
-    state.count = m.indices.length;
     resetView();
   }
 
@@ -317,5 +357,47 @@ drop.addEventListener("drop", (e) => {
   if (e.dataTransfer.files.length) choose(e.dataTransfer.files[0]);
 });
 $("go").addEventListener("click", submit);
+
+// ---------- volume modelling: compose or morph two finished jobs ----------
+async function refreshJobs() {
+  try {
+    const list = await (await fetch("/v1/reconstructions")).json();
+    const done = list.filter((j) => j.status === "succeeded" && !["composition", "morph"].includes(j.input.format));
+    for (const id of ["opA", "opB"]) {
+      const sel = $(id), keep = sel.value;
+      sel.innerHTML = done.map((j) => `<option value="${j.id}">${j.id.slice(0, 8)} · ${j.input.points} pts · ${j.triangles} tri</option>`).join("");
+      if (keep) sel.value = keep;
+    }
+    $("compose").disabled = done.length < 1;
+  } catch (e) { /* the list is optional */ }
+}
+
+async function compose() {
+  const a = $("opA").value, b = $("opB").value, op = $("op").value, amount = $("amount").value.trim();
+  const headers = { "Content-Type": "application/json" };
+  const token = $("token").value.trim();
+  if (token) headers["Authorization"] = "Bearer " + token;
+  let url = "/v1/compositions", body;
+  if (op === "morph") {
+    url = "/v1/morphs";
+    body = { a, b, frames: amount ? Number(amount) : 8 };
+  } else if (op === "blend") {
+    body = { expression: `blend(${a}, ${b}, ${amount || "0.05"})` };
+  } else {
+    body = { expression: `${op}(${a}, ${b})` };
+  }
+  setStatus("Submitting…");
+  try {
+    const r = await fetch(url, { method: "POST", headers, body: JSON.stringify(body) });
+    const v = await r.json();
+    if (!r.ok) throw new Error(v.error ? `${v.error.code}: ${v.error.message}` : `HTTP ${r.status}`);
+    location.hash = "job=" + v.id;
+    follow(v.id);
+  } catch (e) {
+    setStatus("Failed: " + e.message, true);
+  }
+}
+$("compose").addEventListener("click", compose);
+refreshJobs();
 const m = location.hash.match(/job=([0-9a-f-]{36})/);
 if (m) follow(m[1]);

@@ -5,6 +5,7 @@
 
 pub mod meta;
 pub mod reconstructions;
+pub mod volume;
 
 use super::error::ApiError;
 use super::jobs::{Job, JobView};

@@ -484,6 +484,50 @@ pub async fn mesh_obj(
     mesh_file(&st, &id, MeshFormat::Obj).await
 }
 
+/// The fitted implicit function in the `.field` format (docs/volume-modelling.md): the operand of
+/// `rbfsurf csg`, `morph` and `voxelize`. CSRBF jobs only (404 `no_field` for the global methods).
+#[utoipa::path(get, path = "/v1/reconstructions/{id}/field", tag = "reconstructions",
+    params(("id" = String, Path, description = "job id (UUID)")),
+    responses((status = 200, content_type = "application/octet-stream", body = Vec<u8>),
+        (status = 404, body = ErrorResponse), (status = 409, body = ErrorResponse)))]
+pub async fn job_field(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = find_job(&st, &id)?;
+    let view = job.view();
+    if view.status != JobStatus::Succeeded {
+        return Err(not_ready(&view));
+    }
+    let path = st.jobs.store().file(view.id, "fitted.field");
+    let Ok(file) = tokio::fs::File::open(&path).await else {
+        return Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "no_field",
+            format!(
+                "job {} has no saved field (only the csrbf method saves one)",
+                view.id
+            ),
+        ));
+    };
+    let len = file
+        .metadata()
+        .await
+        .map_err(|e| ApiError::internal(format!("stored field unreadable: {e}")))?
+        .len();
+    let disposition = format!("attachment; filename=\"rbfsurf-{}.field\"", view.id);
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/octet-stream".to_string()),
+            (header::CONTENT_DISPOSITION, disposition),
+            (header::CONTENT_LENGTH, len.to_string()),
+        ],
+        body,
+    )
+        .into_response())
+}
+
 /// The reconstruction report (JSON contract of the README).
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/report", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
