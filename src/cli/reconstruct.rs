@@ -56,6 +56,7 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         mesh: &a.output,
         format,
         report: a.report.as_deref(),
+        job_memory_mib: None,
     };
     let progress = BarProgress::new(a.quiet);
     let summary = pipeline::run(

@@ -10,7 +10,7 @@ use crate::progress::Progress;
 use crate::rbf::{Support, estimate_support};
 use crate::report::{MatrixReport, Timings};
 use crate::spatial::{IndexKind, build_index};
-use crate::variational::{VariationalParams, fit_mls_3d, fit_variational_3d};
+use crate::variational::{VariationalParams, fit_mls_3d, fit_variational_3d_with};
 use std::time::Instant;
 
 /// Fit Turk–O'Brien (`r³`, pseudo-normals, dense LBLᵀ) or Shen's MLS to the cleaned, normalised cloud.
@@ -39,7 +39,7 @@ pub(super) fn fit_global(
             MatrixReport::default(),
         ),
         _ => {
-            let f = fit_variational_3d(&points, normals, &vp)?;
+            let f = fit_variational_3d_with(&points, normals, &vp, progress)?;
             let n = f.fit.info.unknowns;
             let dense = MatrixReport {
                 n,

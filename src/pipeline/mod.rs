@@ -146,6 +146,7 @@ fn reconstruct_inner(
         timings_s: timings,
         memory: crate::report::MemoryReport {
             peak_rss_mib: peak_rss_mib(),
+            process_peak_rss_mib: None,
         },
         polygonize,
     };

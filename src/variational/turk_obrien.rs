@@ -208,6 +208,16 @@ pub fn fit_turk_obrien<const D: usize>(
     samples: &[Sample<D>],
     params: &TurkObrienParams,
 ) -> Result<TurkObrienFit<D>, VariationalError> {
+    fit_turk_obrien_with(samples, params, &crate::progress::NoProgress)
+}
+
+/// [`fit_turk_obrien`] that stops with [`VariationalError::Cancelled`] within about 20 ms of
+/// `progress.cancelled()` turning true, also in the middle of the dense factorisation.
+pub fn fit_turk_obrien_with<const D: usize>(
+    samples: &[Sample<D>],
+    params: &TurkObrienParams,
+    progress: &dyn crate::progress::Progress,
+) -> Result<TurkObrienFit<D>, VariationalError> {
     validate_samples(samples)?;
     let frame = Frame::of_points(samples.iter().map(|s| s.p));
     let norm: Vec<Sample<D>> = frame.normalize_samples(samples);
@@ -226,17 +236,17 @@ pub fn fit_turk_obrien<const D: usize>(
         NormalMode::Pseudo(p) => {
             let c = expand_pseudo_normals(&norm, &p, 1.0)?;
             let rhs: Vec<Vec<f64>> = vec![c.iter().map(|v| v.value).collect()];
-            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns)?;
+            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns, progress)?;
             (parts, c, info)
         }
         NormalMode::MannFunctional => {
             let c = sample_constraints(&norm);
             let rhs = mann_rhs(&norm);
-            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns)?;
+            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns, progress)?;
             (parts, c, info)
         }
         NormalMode::Hermite => {
-            let (part, info) = solve_hermite(&norm, kernel, params.max_unknowns)?;
+            let (part, info) = solve_hermite(&norm, kernel, params.max_unknowns, progress)?;
             (vec![part], sample_constraints(&norm), info)
         }
     };
@@ -314,6 +324,7 @@ fn solve_values<const D: usize>(
     rhs: &[Vec<f64>],
     kernel: RadialKernel,
     max_unknowns: usize,
+    progress: &dyn crate::progress::Progress,
 ) -> Result<(Vec<RbfExpansion<D>>, FitInfo), VariationalError> {
     let n = c.len();
     if n + D + 1 > max_unknowns {
@@ -325,7 +336,7 @@ fn solve_values<const D: usize>(
     let pts: Vec<[f64; D]> = c.iter().map(|v| v.p).collect();
     let rows: Vec<usize> = c.iter().map(|v| v.origin.row()).collect();
     check_affine_rank(&pts, &rows)?;
-    let solver = SymmetricSolver::new(&value_matrix(&pts, kernel))?;
+    let solver = SymmetricSolver::new_cancellable(value_matrix(&pts, kernel), progress)?;
     let mut b = Mat::<f64>::from_fn(
         n + D + 1,
         rhs.len(),
@@ -385,6 +396,7 @@ fn solve_hermite<const D: usize>(
     s: &[Sample<D>],
     kernel: RadialKernel,
     max_unknowns: usize,
+    progress: &dyn crate::progress::Progress,
 ) -> Result<(RbfExpansion<D>, FitInfo), VariationalError> {
     let mut funcs: Vec<Functional> = (0..s.len())
         .map(|point| Functional { point, axis: None })
@@ -422,7 +434,7 @@ fn solve_hermite<const D: usize>(
             0.0
         }
     });
-    let solver = SymmetricSolver::new(&a)?;
+    let solver = SymmetricSolver::new_cancellable(a, progress)?;
     let mut b = Mat::<f64>::from_fn(m + D + 1, 1, |i, _| match funcs.get(i) {
         Some(Functional { point, axis: None }) => s[*point].value,
         Some(Functional {

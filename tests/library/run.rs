@@ -14,6 +14,7 @@ fn output<'a>(mesh: &'a Path, report: &'a Path) -> RunOutput<'a> {
         mesh,
         format: MeshFormat::Glb,
         report: Some(report),
+        job_memory_mib: None,
     }
 }
 

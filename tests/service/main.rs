@@ -5,8 +5,10 @@
 mod cli;
 #[path = "../common/mod.rs"]
 mod common;
+mod hostile;
 mod http;
 mod load;
 #[path = "../server_common/mod.rs"]
 mod server_common;
+mod stop;
 mod submit;
