@@ -144,6 +144,31 @@ pub fn lower_from_fn(n: usize, f: impl Fn(usize, usize) -> f64 + Sync) -> Mat<f6
     faer::MatRef::from_column_major_slice(&buf, n, n).to_owned()
 }
 
+/// [`lower_from_fn`] that skips the remaining columns once `progress.cancelled()` turns true and
+/// then answers [`LinalgError::Cancelled`] (an `n²` build of a 12,000-unknown system takes seconds).
+pub fn lower_from_fn_cancellable(
+    n: usize,
+    f: impl Fn(usize, usize) -> f64 + Sync,
+    progress: &dyn Progress,
+) -> Result<Mat<f64>, LinalgError> {
+    use rayon::prelude::*;
+    let mut buf = vec![0.0; n * n];
+    buf.par_chunks_mut(n.max(1))
+        .enumerate()
+        .for_each(|(j, col)| {
+            if j % 16 == 0 && progress.cancelled() {
+                return;
+            }
+            for (i, v) in col.iter_mut().enumerate().skip(j) {
+                *v = f(i, j);
+            }
+        });
+    if progress.cancelled() {
+        return Err(LinalgError::Cancelled);
+    }
+    Ok(faer::MatRef::from_column_major_slice(&buf, n, n).to_owned())
+}
+
 /// Mirror the lower triangle into the upper one (for products with the full matrix).
 pub fn symmetrize_lower(a: &mut Mat<f64>) {
     let n = a.nrows();

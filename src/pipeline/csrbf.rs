@@ -101,7 +101,7 @@ pub fn fit_field(
         finest_support: support.radius,
     };
     let t = Instant::now();
-    let residual = residual_at(&field, &points);
+    let residual = residual_at(&field, &points, progress)?;
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         field: Box::new(field),

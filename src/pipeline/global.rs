@@ -57,7 +57,7 @@ pub(super) fn fit_global(
     };
     timings.factor = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let residual = residual_at(field.as_ref(), &points);
+    let residual = residual_at(field.as_ref(), &points, progress)?;
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         field,

@@ -256,12 +256,19 @@ pub fn fit_turk_obrien_with<const D: usize>(
         info,
         constraints,
     };
+    if progress.cancelled() {
+        return Err(VariationalError::Cancelled);
+    }
+    // O(n²) like the matrix: stops early (NaN) on a cancel, checked below.
     fit.info.max_residual = {
         use rayon::prelude::*;
         let f = &fit;
         f.constraints
             .par_chunks(256)
             .map(|cs| {
+                if progress.cancelled() {
+                    return f64::NAN;
+                }
                 let us: Vec<[f64; D]> = cs.iter().map(|c| c.p).collect();
                 let mut v = vec![0.0; us.len()];
                 f.values_normalized(&us, &mut v);
@@ -272,6 +279,9 @@ pub fn fit_turk_obrien_with<const D: usize>(
             })
             .reduce(|| 0.0, f64::max)
     };
+    if progress.cancelled() {
+        return Err(VariationalError::Cancelled);
+    }
     for c in &mut fit.constraints {
         c.p = frame.inverse(&c.p);
     }
@@ -305,8 +315,28 @@ fn mann_rhs<const D: usize>(s: &[Sample<D>]) -> Vec<Vec<f64>> {
 
 /// Assemble `[Φ P; Pᵀ 0]` (lower triangle) for value constraints.
 pub fn value_matrix<const D: usize>(pts: &[[f64; D]], kernel: RadialKernel) -> Mat<f64> {
+    lower_from_fn(pts.len() + D + 1, value_entry(pts, kernel))
+}
+
+/// [`value_matrix`] that stops on a cancel.
+fn value_matrix_cancellable<const D: usize>(
+    pts: &[[f64; D]],
+    kernel: RadialKernel,
+    progress: &dyn crate::progress::Progress,
+) -> Result<Mat<f64>, crate::linalg::LinalgError> {
+    crate::linalg::dense::lower_from_fn_cancellable(
+        pts.len() + D + 1,
+        value_entry(pts, kernel),
+        progress,
+    )
+}
+
+fn value_entry<const D: usize>(
+    pts: &[[f64; D]],
+    kernel: RadialKernel,
+) -> impl Fn(usize, usize) -> f64 + Sync + '_ {
     let n = pts.len();
-    lower_from_fn(n + D + 1, |i, j| {
+    move |i, j| {
         if i < n {
             let r2: f64 = (0..D).map(|k| (pts[i][k] - pts[j][k]).powi(2)).sum();
             kernel.phi_r2(r2)
@@ -315,7 +345,7 @@ pub fn value_matrix<const D: usize>(pts: &[[f64; D]], kernel: RadialKernel) -> M
         } else {
             0.0
         }
-    })
+    }
 }
 
 /// Solve the value system for several right-hand sides; one expansion per column.
@@ -336,7 +366,7 @@ fn solve_values<const D: usize>(
     let pts: Vec<[f64; D]> = c.iter().map(|v| v.p).collect();
     let rows: Vec<usize> = c.iter().map(|v| v.origin.row()).collect();
     check_affine_rank(&pts, &rows)?;
-    let solver = SymmetricSolver::new_cancellable(value_matrix(&pts, kernel), progress)?;
+    let solver = SymmetricSolver::new_cancellable(value_matrix_cancellable(&pts, kernel, progress)?, progress)?;
     let mut b = Mat::<f64>::from_fn(
         n + D + 1,
         rhs.len(),
