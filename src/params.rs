@@ -635,7 +635,12 @@ mod tests {
                 assert!(o.is_ok(), "{name}={v}");
             }
         }
-        for (v, ok) in [("auto", true), ("none", true), ("1000", true), ("999", false)] {
+        for (v, ok) in [
+            ("auto", true),
+            ("none", true),
+            ("1000", true),
+            ("999", false),
+        ] {
             assert_eq!(v.parse::<crate::rbf::Blocks>().is_ok(), ok, "{v}");
         }
         assert!(SUPPORT.contains(2.0) && !SUPPORT.contains(0.0) && !SUPPORT.contains(f64::NAN));

@@ -85,7 +85,9 @@ impl ServeArgs {
         }
         let min_rate = self.min_upload_kib_s.unwrap_or(d.min_upload_rate >> 10);
         if min_rate == 0 {
-            bail!("--min-upload-kib-s 0: give a positive rate (slow uploads hold memory and slots)");
+            bail!(
+                "--min-upload-kib-s 0: give a positive rate (slow uploads hold memory and slots)"
+            );
         }
         let token = self.token()?;
         Ok(ServerConfig {
@@ -129,7 +131,9 @@ impl ServeArgs {
             }
             (None, None) => std::env::var("RBFSURF_TOKEN").ok(),
         };
-        Ok(token.map(|t| t.trim().to_string()).filter(|t| !t.is_empty()))
+        Ok(token
+            .map(|t| t.trim().to_string())
+            .filter(|t| !t.is_empty()))
     }
 }
 

@@ -266,9 +266,7 @@ pub fn residual_at(
 ) -> Result<ResidualReport, ReconError> {
     let r: Vec<Option<Vec<f64>>> = points
         .par_chunks(1024)
-        .map(|c| {
-            (!progress.cancelled()).then(|| c.iter().map(|p| field.value(p).abs()).collect())
-        })
+        .map(|c| (!progress.cancelled()).then(|| c.iter().map(|p| field.value(p).abs()).collect()))
         .collect();
     check_cancel(progress)?;
     let r: Vec<f64> = r.into_iter().flatten().flatten().collect();

@@ -59,7 +59,10 @@ impl std::fmt::Debug for RunOutput<'_> {
             .field("mesh", &self.mesh)
             .field("format", &self.format)
             .field("report", &self.report)
-            .field("job_memory_mib", &self.job_memory_mib.map(|_| "caller's measure"))
+            .field(
+                "job_memory_mib",
+                &self.job_memory_mib.map(|_| "caller's measure"),
+            )
             .finish()
     }
 }

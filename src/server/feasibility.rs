@@ -43,7 +43,11 @@ pub fn mesh_mib(resolution: usize) -> f64 {
 
 /// 422 `system_too_large` with the estimate.
 fn too_large(message: String) -> ApiError {
-    ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "system_too_large", message)
+    ApiError::new(
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "system_too_large",
+        message,
+    )
 }
 
 /// Refuses a request that asks for more than the operator allows (only the resolution can be
@@ -202,11 +206,17 @@ mod tests {
             ..Default::default()
         };
         let e = check_cloud(&cloud, &p).unwrap_err();
-        assert_eq!((e.status.as_u16(), e.body.code.as_str()), (400, "bad_parameter"));
+        assert_eq!(
+            (e.status.as_u16(), e.body.code.as_str()),
+            (400, "bad_parameter")
+        );
         p.support = Support::Radius(1.0);
         p.max_memory_mib = 64;
         let e = check_cloud(&cloud, &p).unwrap_err();
-        assert_eq!((e.status.as_u16(), e.body.code.as_str()), (422, "system_too_large"));
+        assert_eq!(
+            (e.status.as_u16(), e.body.code.as_str()),
+            (422, "system_too_large")
+        );
         assert!(e.body.message.contains("MiB"), "{}", e.body.message);
         p.support = Support::Radius(0.1);
         p.max_memory_mib = 8192;

@@ -507,7 +507,9 @@ impl JobManager {
             )),
             // The readers' and writers' messages name server paths: the client gets the generic
             // message, the log the details. (Numerical failures name none and keep theirs.)
-            Err(e @ (RunError::Read(_) | RunError::Write(_))) if e.kind() == ErrorKind::Internal => {
+            Err(e @ (RunError::Read(_) | RunError::Write(_)))
+                if e.kind() == ErrorKind::Internal =>
+            {
                 Err(JobError::internal(format!("job {}: {e}", job.id)))
             }
             Err(e) => Err(JobError::Failed(ErrorBody {

@@ -77,7 +77,10 @@ pub fn parameter_schema(name: &str) -> Option<serde_json::Value> {
     if name == "blocks" {
         return Some(json!({"type": "string", "pattern": crate::params::BLOCKS_PATTERN}));
     }
-    if let Some((_, values)) = crate::params::choices().into_iter().find(|(n, _)| *n == name) {
+    if let Some((_, values)) = crate::params::choices()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+    {
         return Some(json!({"type": "string", "enum": values}));
     }
     let r = crate::params::RANGES.iter().find(|r| r.name == name)?;

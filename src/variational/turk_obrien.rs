@@ -366,7 +366,10 @@ fn solve_values<const D: usize>(
     let pts: Vec<[f64; D]> = c.iter().map(|v| v.p).collect();
     let rows: Vec<usize> = c.iter().map(|v| v.origin.row()).collect();
     check_affine_rank(&pts, &rows)?;
-    let solver = SymmetricSolver::new_cancellable(value_matrix_cancellable(&pts, kernel, progress)?, progress)?;
+    let solver = SymmetricSolver::new_cancellable(
+        value_matrix_cancellable(&pts, kernel, progress)?,
+        progress,
+    )?;
     let mut b = Mat::<f64>::from_fn(
         n + D + 1,
         rhs.len(),

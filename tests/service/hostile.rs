@@ -66,7 +66,12 @@ async fn a_request_cannot_lift_the_operators_limits() {
         sphere_xyz(500, 2),
     )
     .await;
-    assert_eq!(a.status, StatusCode::OK, "{}", String::from_utf8_lossy(&a.body));
+    assert_eq!(
+        a.status,
+        StatusCode::OK,
+        "{}",
+        String::from_utf8_lossy(&a.body)
+    );
     let id = a.json()["id"].as_str().unwrap().to_string();
     let stored = std::fs::read_to_string(s.dir.path().join(&id).join("params.json")).unwrap();
     assert!(stored.contains("\"max-memory-mib\": 200"), "{stored}");
@@ -97,7 +102,11 @@ async fn impossible_parameters_are_refused_at_submit_with_4xx() {
         .await;
         let secs = t.elapsed().as_secs_f64();
         println!("{q}: {} in {secs:.2} s", a.status);
-        assert_eq!(a.expect_error(StatusCode::from_u16(status).unwrap()), code, "{q}");
+        assert_eq!(
+            a.expect_error(StatusCode::from_u16(status).unwrap()),
+            code,
+            "{q}"
+        );
         assert!(secs < 20.0, "{q} took {secs} s");
     }
     assert!(s.state.jobs.list().is_empty());
@@ -118,7 +127,12 @@ async fn degenerate_uploads_fail_in_their_job_and_do_not_hold_up_others() {
     )
     .await;
     let accept = t.elapsed().as_secs_f64();
-    assert_eq!(a.status, StatusCode::ACCEPTED, "{}", String::from_utf8_lossy(&a.body));
+    assert_eq!(
+        a.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&a.body)
+    );
     let line_id = a.json()["id"].as_str().unwrap().to_string();
     let t = Instant::now();
     let b = post(
@@ -136,7 +150,10 @@ async fn degenerate_uploads_fail_in_their_job_and_do_not_hold_up_others() {
     let line = wait_terminal(&s.app, &line_id, 60).await;
     assert_eq!(line["status"], "failed");
     assert_eq!(line["error"]["code"], "unreconstructable");
-    assert!(line["error"]["message"].as_str().unwrap().contains("line"), "{line}");
+    assert!(
+        line["error"]["message"].as_str().unwrap().contains("line"),
+        "{line}"
+    );
 }
 
 /// Sends the head of a POST whose body never comes (or trickles), and returns the stream.
@@ -213,17 +230,27 @@ async fn stalled_and_trickling_clients_are_cut_off_and_do_not_block_uploads() {
         assert_eq!(code, 408, "{}", String::from_utf8_lossy(&body));
         assert!(String::from_utf8_lossy(&body).contains("upload_too_slow"));
     }
-    assert_eq!(trickle.await.unwrap(), 408, "the trickling upload is refused");
+    assert_eq!(
+        trickle.await.unwrap(),
+        408,
+        "the trickling upload is refused"
+    );
     let closed_after = header_trickle.await.unwrap();
     println!("header trickler disconnected after {closed_after:.1} s");
-    assert!(closed_after < 20.0, "header trickler kept for {closed_after} s");
+    assert!(
+        closed_after < 20.0,
+        "header trickler kept for {closed_after} s"
+    );
     // An idle keep-alive connection is closed too.
     let mut idle = tokio::net::TcpStream::connect(addr).await.unwrap();
     let t = Instant::now();
     let mut buf = Vec::new();
     let r = tokio::time::timeout(Duration::from_secs(20), idle.read_to_end(&mut buf)).await;
     assert!(r.is_ok(), "an idle connection was never closed");
-    println!("idle connection closed after {:.1} s", t.elapsed().as_secs_f64());
+    println!(
+        "idle connection closed after {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
     live.shutdown().await;
 }
 
@@ -300,7 +327,10 @@ async fn internal_errors_name_no_server_path_and_carry_an_error_id() {
     let id = a.json()["id"].as_str().unwrap().to_string();
     std::fs::remove_file(s.dir.path().join(&id).join("mesh.glb")).unwrap();
     let m = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.glb")).await;
-    assert_eq!(m.expect_error(StatusCode::INTERNAL_SERVER_ERROR), "internal");
+    assert_eq!(
+        m.expect_error(StatusCode::INTERNAL_SERVER_ERROR),
+        "internal"
+    );
     let text = String::from_utf8_lossy(&m.body).to_string();
     let dir = s.dir.path().display().to_string();
     assert!(!text.contains(&dir) && !text.contains("/tmp"), "{text}");
@@ -319,7 +349,9 @@ fn small_tmpfs(kib: u64) -> Option<tempfile::TempDir> {
 }
 
 fn unmount(dir: &tempfile::TempDir) {
-    let _ = std::process::Command::new("umount").arg(dir.path()).status();
+    let _ = std::process::Command::new("umount")
+        .arg(dir.path())
+        .status();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -374,7 +406,11 @@ async fn with_a_token_listing_needs_it_and_the_scheme_is_case_insensitive() {
         assert_eq!(send(&s.app, req(ok)).await.status, StatusCode::OK, "{ok}");
     }
     for bad in ["Bearer wrong", "Basic s3cret", "s3cret"] {
-        assert_eq!(send(&s.app, req(bad)).await.status, StatusCode::UNAUTHORIZED, "{bad}");
+        assert_eq!(
+            send(&s.app, req(bad)).await.status,
+            StatusCode::UNAUTHORIZED,
+            "{bad}"
+        );
     }
     // Per-job reads stay capability-style: the unguessable id is the key.
     let post_req = axum::http::Request::post("/v1/reconstructions?resolution=24&wait=60")
@@ -385,7 +421,12 @@ async fn with_a_token_listing_needs_it_and_the_scheme_is_case_insensitive() {
     let a = send(&s.app, post_req).await;
     assert_eq!(a.status, StatusCode::OK);
     let id = a.json()["id"].as_str().unwrap().to_string();
-    assert_eq!(get(&s.app, &format!("/v1/reconstructions/{id}")).await.status, StatusCode::OK);
+    assert_eq!(
+        get(&s.app, &format!("/v1/reconstructions/{id}"))
+            .await
+            .status,
+        StatusCode::OK
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

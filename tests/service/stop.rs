@@ -11,8 +11,19 @@ use std::time::{Duration, Instant};
 
 /// Posts and returns the job id (202 expected).
 async fn submit(app: &axum::Router, query: &str, body: Vec<u8>) -> String {
-    let a = post(app, &format!("/v1/reconstructions?{query}"), "text/plain", body).await;
-    assert_eq!(a.status, StatusCode::ACCEPTED, "{}", String::from_utf8_lossy(&a.body));
+    let a = post(
+        app,
+        &format!("/v1/reconstructions?{query}"),
+        "text/plain",
+        body,
+    )
+    .await;
+    assert_eq!(
+        a.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&a.body)
+    );
     a.json()["id"].as_str().unwrap().to_string()
 }
 
@@ -76,7 +87,10 @@ async fn a_large_support_assembly_stops_at_a_cancel() {
     let d = delete(&s.app, &format!("/v1/reconstructions/{id}")).await;
     assert_eq!(d.status, StatusCode::ACCEPTED);
     let (v, secs) = ended(&s.app, &id, t).await;
-    println!("assembly cancel: cancelled after {secs:.2} s (stage {})", v["stage"]);
+    println!(
+        "assembly cancel: cancelled after {secs:.2} s (stage {})",
+        v["stage"]
+    );
     assert_eq!(v["status"], "cancelled", "{v}");
     assert!(secs < 3.0, "cancel took {secs} s");
 }
@@ -93,12 +107,18 @@ async fn delete_right_after_post_never_ends_succeeded() {
                 let v = wait_terminal(&s.app, &id, 60).await;
                 assert_eq!(v["status"], "cancelled", "202 to DELETE, then {v}");
                 let m = get(&s.app, &format!("/v1/reconstructions/{id}/mesh.glb")).await;
-                assert_eq!(m.status, StatusCode::CONFLICT, "a cancelled job has no mesh");
+                assert_eq!(
+                    m.status,
+                    StatusCode::CONFLICT,
+                    "a cancelled job has no mesh"
+                );
                 cancelled += 1;
             }
             StatusCode::NO_CONTENT => {
                 assert_eq!(
-                    get(&s.app, &format!("/v1/reconstructions/{id}")).await.status,
+                    get(&s.app, &format!("/v1/reconstructions/{id}"))
+                        .await
+                        .status,
                     StatusCode::NOT_FOUND
                 );
             }

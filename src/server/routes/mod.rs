@@ -248,7 +248,10 @@ mod tests {
         let (_, p, _) = parse_params(&pairs(""), &cfg).unwrap();
         assert_eq!(p.max_memory_mib, 512);
         let e = parse_params(&pairs("resolution=257"), &cfg).unwrap_err();
-        assert_eq!((e.status.as_u16(), e.body.code.as_str()), (422, "system_too_large"));
+        assert_eq!(
+            (e.status.as_u16(), e.body.code.as_str()),
+            (422, "system_too_large")
+        );
         parse_params(&pairs("resolution=256"), &cfg).unwrap();
     }
 

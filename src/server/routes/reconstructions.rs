@@ -5,8 +5,7 @@
 //! blocking pool before a job is queued; cleaning and the degeneracy checks run in the job.
 
 use super::upload::{
-    BodyKind, check_cloud, classify, guard_body, read_limited, read_multipart,
-    too_large,
+    BodyKind, check_cloud, classify, guard_body, read_limited, read_multipart, too_large,
 };
 use super::{JobResponse, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs};
 use crate::io::{MeshFormat, decode_glb, write_mesh};
