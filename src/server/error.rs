@@ -13,6 +13,7 @@ pub struct ErrorBody {
     /// Stable identifier: `bad_parameter`, `bad_multipart`, `incomplete_body`, `upload_too_slow`,
     /// `unauthorized`, `not_found`, `not_ready`, `method_not_allowed`, `too_large`,
     /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`,
+    /// `conflicting_parameters`, `unsuitable_parameter`,
     /// `queue_full`, `busy`, `shutting_down`, `job_timeout`, `interrupted`, `cancelled`,
     /// `reconstruction_failed`, `insufficient_storage`, `internal`.
     pub code: String,

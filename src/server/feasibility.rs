@@ -98,11 +98,15 @@ pub fn check_cloud(cloud: &PointCloud, params: &ReconParams) -> Result<(), ApiEr
         Support::Radius(r) => {
             let probe = probe_cloud(&cloud.points, r);
             if probe.spacing > 0.0 && r < probe.spacing {
-                return Err(ApiError::bad_parameter(format!(
-                    "support {r} is smaller than the point spacing (about {:.3e} normalised units): each point would see no neighbour and the surface would be the carrier alone; use support >= {:.3e} or neighbours=K (e.g. 30)",
-                    probe.spacing,
-                    3.0 * probe.spacing
-                )));
+                return Err(ApiError::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "unsuitable_parameter",
+                    format!(
+                        "support {r} is smaller than the point spacing (about {:.3e} normalised units): each point would see no neighbour and the surface would be the carrier alone; use support >= {:.3e} or neighbours=K (e.g. 30)",
+                        probe.spacing,
+                        3.0 * probe.spacing
+                    ),
+                ));
             }
             check_system(n, probe.neighbours, budget, &format!("support {r}"))
         }

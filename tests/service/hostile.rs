@@ -82,14 +82,18 @@ async fn impossible_parameters_are_refused_at_submit_with_4xx() {
     let s = start(|c| c.max_memory_mib = 1024);
     let cloud = sphere_xyz(20_000, 3);
     let cases = [
-        ("support=1e-300", 400, "bad_parameter"),
+        ("support=1e-300", 422, "unsuitable_parameter"),
         ("support=1.0", 422, "system_too_large"),
         ("neighbours=2000&max-memory-mib=64", 422, "system_too_large"),
         ("method=variational", 422, "system_too_large"),
         ("resolution=4096", 422, "system_too_large"),
-        ("support=0.1&neighbours=30", 400, "bad_parameter"),
-        ("method=mls&neighbours=30", 400, "bad_parameter"),
-        ("method=variational&support=0.1", 400, "bad_parameter"),
+        ("support=0.1&neighbours=30", 422, "conflicting_parameters"),
+        ("method=mls&neighbours=30", 422, "conflicting_parameters"),
+        (
+            "method=variational&support=0.1",
+            422,
+            "conflicting_parameters",
+        ),
     ];
     for (q, status, code) in cases {
         let t = Instant::now();

@@ -146,6 +146,7 @@ pub fn parse_params(
             rest.push(p);
         }
     }
+    check_conflicts(&rest)?;
     let encoded =
         serde_urlencoded::to_string(&rest).map_err(|e| ApiError::bad_parameter(e.to_string()))?;
     let mut options: ReconOptions = serde_urlencoded::from_str(&encoded).map_err(|e| {
@@ -162,6 +163,34 @@ pub fn parse_params(
     let params = ReconParams::try_from(&options)?;
     super::feasibility::check_request(&params, cfg)?;
     Ok((options, params, wait))
+}
+
+/// 422 `conflicting_parameters` for pairs that are each valid but cannot go together (the
+/// OpenAPI document cannot express that between query parameters, so this is 422, not 400):
+/// `support` with `neighbours`, and either with a method other than `csrbf`.
+fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
+    let has = |n: &str| pairs.iter().any(|p| p.0 == n);
+    let conflict = |m: &str| {
+        Err(ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "conflicting_parameters",
+            m.to_string(),
+        ))
+    };
+    if has("support") && has("neighbours") {
+        return conflict(
+            "support (a radius) and neighbours (a count) both choose the support: give one of them",
+        );
+    }
+    let global = pairs
+        .iter()
+        .any(|p| p.0 == "method" && matches!(p.1.as_str(), "variational" | "mls"));
+    if global && (has("support") || has("neighbours")) {
+        return conflict(
+            "support and neighbours apply to method csrbf only (variational and mls choose their own scale): drop them or use method=csrbf",
+        );
+    }
+    Ok(())
 }
 
 /// The API takes exactly the spellings its OpenAPI document lists (the command line is more
@@ -219,9 +248,6 @@ mod tests {
             "wait=nan",
             "support=0.1&support=0.2",
             "support=-1",
-            "support=0.1&neighbours=20",
-            "method=mls&neighbours=20",
-            "method=variational&support=0.2",
             "max-memory-mib=4194305",
             "ordering=BFS",
             "index=kd-tree",
@@ -231,6 +257,22 @@ mod tests {
             let e = parse(bad).unwrap_err();
             assert_eq!(e.status, StatusCode::BAD_REQUEST, "{bad}");
             assert_eq!(e.body.code, "bad_parameter", "{bad}");
+        }
+    }
+
+    #[test]
+    fn conflicting_pairs_are_422() {
+        for q in [
+            "support=0.1&neighbours=20",
+            "method=mls&neighbours=20",
+            "method=variational&support=0.2",
+        ] {
+            let e = parse(q).unwrap_err();
+            assert_eq!(
+                (e.status.as_u16(), e.body.code.as_str()),
+                (422, "conflicting_parameters"),
+                "{q}"
+            );
         }
     }
 

@@ -42,7 +42,7 @@ use std::time::Duration;
         (status = 409, description = "with `wait`: the job was cancelled while waiting (`{error, job}`)", body = ErrorResponse),
         (status = 413, description = "upload or point count over the limit", body = ErrorResponse),
         (status = 415, description = "unknown format", body = ErrorResponse),
-        (status = 422, description = "parses but cannot be reconstructed, or does not fit the server's limits (`system_too_large` with the estimate); with `wait`: the job failed so (`{error, job}`)", body = ErrorResponse),
+        (status = 422, description = "parses but cannot be reconstructed, does not fit the server's limits (`system_too_large` with the estimate), parameters that conflict (`conflicting_parameters`) or do not suit the cloud (`unsuitable_parameter`); with `wait`: the job failed so (`{error, job}`)", body = ErrorResponse),
         (status = 429, description = "queue full, or too many uploads at once (see Retry-After)", body = ErrorResponse),
         (status = 500, description = "internal error (generic message with an error id; with `wait`: `{error, job}`)", body = ErrorResponse),
         (status = 503, description = "shutting down", body = ErrorResponse),
