@@ -212,7 +212,7 @@ mod tests {
         let e = check_cloud(&cloud, &p).unwrap_err();
         assert_eq!(
             (e.status.as_u16(), e.body.code.as_str()),
-            (400, "bad_parameter")
+            (422, "unsuitable_parameter")
         );
         p.support = Support::Radius(1.0);
         p.max_memory_mib = 64;

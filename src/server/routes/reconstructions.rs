@@ -22,6 +22,20 @@ use axum::response::{IntoResponse, Response};
 use std::convert::Infallible;
 use std::time::Duration;
 
+/// A point file's bytes (documentation type of the binary request bodies).
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct PointFile(pub Vec<u8>);
+
+/// A `multipart/form-data` upload: the point file in a part named `file`; parameters may come as
+/// further text fields with the query's names.
+#[derive(utoipa::ToSchema)]
+pub struct MultipartUpload {
+    /// The point file (PLY, XYZ/PTS, CSV or OBJ).
+    #[schema(value_type = String, format = Binary)]
+    pub file: Vec<u8>,
+}
+
 /// Submit a point cloud for reconstruction.
 ///
 /// The body is the point file (Content-Type by format; `application/octet-stream` is sniffed) or
@@ -31,8 +45,8 @@ use std::time::Duration;
     params(crate::params::ReconOptions, WaitQuery),
     request_body(description = "point file: PLY (ascii/binary), XYZ/PTS text, CSV, OBJ vertices; or multipart/form-data with `file`",
         content(
-            (Vec<u8> = "application/ply"), (String = "text/plain"), (String = "text/csv"),
-            (String = "model/obj"), (Vec<u8> = "application/octet-stream"), (Vec<u8> = "multipart/form-data"))),
+            (PointFile = "application/ply"), (String = "text/plain"), (String = "text/csv"),
+            (String = "model/obj"), (PointFile = "application/octet-stream"), (MultipartUpload = "multipart/form-data"))),
     responses(
         (status = 202, description = "accepted and queued (or still running after `wait`)", body = JobResponse),
         (status = 200, description = "succeeded (or was cancelled) within `wait`", body = JobResponse),
