@@ -148,6 +148,14 @@ impl ReconError {
             match self {
                 ReconError::Params(_) => ErrorKind::BadParameter,
                 ReconError::Rbf(crate::rbf::RbfError::TooLarge { .. })
+                | ReconError::Linalg(crate::linalg::LinalgError::TooLarge { .. })
+                | ReconError::Variational(crate::variational::VariationalError::TooLarge {
+                    ..
+                })
+                | ReconError::Polygonize(
+                    crate::polygonize::PolygonizeError::GridTooLarge { .. }
+                    | crate::polygonize::PolygonizeError::TooManyVertices { .. },
+                )
                 | ReconError::TooManyPoints { .. } => ErrorKind::OverBudget,
                 _ => ErrorKind::Internal,
             }

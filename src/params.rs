@@ -4,7 +4,7 @@
 use crate::clean::CleanParams;
 use crate::linalg::SolverKind;
 use crate::ordering::OrderingKind;
-use crate::rbf::{CarrierParams, Kernel, Support};
+use crate::rbf::{CarrierKind, CarrierParams, Kernel, Support};
 use crate::spatial::IndexKind;
 
 /// Optional polynomial part of the spline.
@@ -229,6 +229,127 @@ pub struct ParamError {
     pub expected: &'static str,
 }
 
+/// The allowed values of one numeric parameter: the single definition that
+/// [`ReconParams::validate`] checks and the HTTP API's OpenAPI document publishes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Range {
+    /// Parameter name as on the command line and in the API.
+    pub name: &'static str,
+    /// Whole numbers only.
+    pub integer: bool,
+    /// Lower bound.
+    pub min: f64,
+    /// The lower bound itself is excluded.
+    pub exclusive_min: bool,
+    /// Upper bound (inclusive), if any.
+    pub max: Option<f64>,
+}
+
+impl Range {
+    const fn int(name: &'static str, min: u64, max: u64) -> Range {
+        Range {
+            name,
+            integer: true,
+            min: min as f64,
+            exclusive_min: false,
+            max: Some(max as f64),
+        }
+    }
+
+    const fn num(name: &'static str, min: f64, exclusive_min: bool, max: Option<f64>) -> Range {
+        Range {
+            name,
+            integer: false,
+            min,
+            exclusive_min,
+            max,
+        }
+    }
+
+    /// True when `v` is finite and inside the range.
+    pub fn contains(&self, v: f64) -> bool {
+        v.is_finite()
+            && if self.exclusive_min {
+                v > self.min
+            } else {
+                v >= self.min
+            }
+            && self.max.is_none_or(|m| v <= m)
+    }
+}
+
+/// `support`: a radius in (0, 2] normalised units.
+pub const SUPPORT: Range = Range::num("support", 0.0, true, Some(2.0));
+/// `neighbours`: 4..=2000.
+pub const NEIGHBOURS: Range = Range::int("neighbours", 4, 2000);
+/// `resolution`: 8..=4096 (a server may allow less).
+pub const RESOLUTION: Range = Range::int("resolution", 8, 4096);
+/// `leaf-size`: 1..=4096.
+pub const LEAF_SIZE: Range = Range::int("leaf-size", 1, 4096);
+/// `merge-tolerance`: [0, 0.01] of the bbox diagonal.
+pub const MERGE_TOLERANCE: Range = Range::num("merge-tolerance", 0.0, false, Some(1e-2));
+/// `max-memory-mib`: 16..=4194304 (a server caps it at its own budget).
+pub const MAX_MEMORY_MIB: Range = Range::int("max-memory-mib", 16, 1 << 22);
+/// `smoothing`: λ in [0, 10].
+pub const SMOOTHING: Range = Range::num("smoothing", 0.0, false, Some(10.0));
+/// `outlier-std-ratio`: positive.
+pub const OUTLIER_STD_RATIO: Range = Range::num("outlier-std-ratio", 0.0, true, None);
+/// `levels`: 1..=8.
+pub const LEVELS: Range = Range::int("levels", 1, 8);
+/// `min-component`: [0, 1].
+pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.0));
+/// `min-support`: [0, 0.5].
+pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5));
+
+/// Every numeric parameter's range.
+pub const RANGES: [Range; 11] = [
+    SUPPORT,
+    NEIGHBOURS,
+    RESOLUTION,
+    LEAF_SIZE,
+    MERGE_TOLERANCE,
+    MAX_MEMORY_MIB,
+    SMOOTHING,
+    OUTLIER_STD_RATIO,
+    LEVELS,
+    MIN_COMPONENT,
+    MIN_SUPPORT,
+];
+
+/// The exact spellings each choice parameter accepts (the HTTP API accepts only these; the
+/// command line also takes a few aliases). `blocks` is not here: it also takes a number.
+pub fn choices() -> Vec<(&'static str, Vec<&'static str>)> {
+    vec![
+        (
+            "method",
+            [Method::Csrbf, Method::Variational, Method::Mls]
+                .map(Method::name)
+                .to_vec(),
+        ),
+        ("kernel", Kernel::ALL.map(Kernel::name).to_vec()),
+        (
+            "carrier",
+            [
+                CarrierKind::Auto,
+                CarrierKind::Sphere,
+                CarrierKind::Ellipsoid,
+                CarrierKind::Local,
+            ]
+            .map(CarrierKind::name)
+            .to_vec(),
+        ),
+        ("ordering", ["none", "bfs", "rcm"].to_vec()),
+        ("solver", SolverKind::ALL.map(SolverKind::name).to_vec()),
+        ("polynomial", ["none", "linear"].to_vec()),
+        ("index", ["octree", "kdtree"].to_vec()),
+        ("boundary", ["auto", "trim", "closed"].to_vec()),
+        ("color", ["rgb", "intensity", "none"].to_vec()),
+    ]
+}
+
+/// `blocks`: `auto`, `none` or a maximum number of points per block (1000 or more).
+pub const BLOCKS_PATTERN: &str = "^(auto|none|[1-9][0-9]{3,8})$";
+
 impl ReconParams {
     /// Check ranges; the command line and the HTTP API call this before any work.
     pub fn validate(&self) -> Result<(), ParamError> {
@@ -240,24 +361,24 @@ impl ReconParams {
             })
         };
         match self.support {
-            Support::Radius(r) if !(r.is_finite() && r > 0.0 && r <= 2.0) => {
+            Support::Radius(r) if !SUPPORT.contains(r) => {
                 return err(
                     "support",
                     r.to_string(),
                     "a radius in (0, 2] normalised units (the longest bbox edge is 1)",
                 );
             }
-            Support::Neighbours(k) if !(4..=2000).contains(&k) => {
+            Support::Neighbours(k) if !NEIGHBOURS.contains(k as f64) => {
                 return err("neighbours", k.to_string(), "an integer in 4..=2000");
             }
             _ => {}
         }
         if let Some(r) = self.resolution
-            && !(8..=4096).contains(&r)
+            && !RESOLUTION.contains(r as f64)
         {
             return err("resolution", r.to_string(), "an integer in 8..=4096");
         }
-        if !(1..=4096).contains(&self.leaf_size) {
+        if !LEAF_SIZE.contains(self.leaf_size as f64) {
             return err(
                 "leaf-size",
                 self.leaf_size.to_string(),
@@ -265,7 +386,7 @@ impl ReconParams {
             );
         }
         let tol = self.clean.merge_tolerance;
-        if !(tol.is_finite() && (0.0..=1e-2).contains(&tol)) {
+        if !MERGE_TOLERANCE.contains(tol) {
             return err(
                 "merge-tolerance",
                 tol.to_string(),
@@ -273,12 +394,12 @@ impl ReconParams {
             );
         }
         if let Smoothing::Lambda(l) = self.smoothing
-            && !(l.is_finite() && (0.0..=10.0).contains(&l))
+            && !SMOOTHING.contains(l)
         {
             return err("smoothing", l.to_string(), "a number in [0, 10]");
         }
         if let Some(o) = self.outliers
-            && !(o.std_ratio.is_finite() && o.std_ratio > 0.0 && (2..=200).contains(&o.neighbours))
+            && !(OUTLIER_STD_RATIO.contains(o.std_ratio) && (2..=200).contains(&o.neighbours))
         {
             return err(
                 "outlier-std-ratio",
@@ -286,24 +407,24 @@ impl ReconParams {
                 "a positive number (e.g. 2.5)",
             );
         }
-        if !(self.min_component.is_finite() && (0.0..=1.0).contains(&self.min_component)) {
+        if !MIN_COMPONENT.contains(self.min_component) {
             return err(
                 "min-component",
                 self.min_component.to_string(),
                 "a fraction of the largest component in [0, 1]",
             );
         }
-        if !(self.min_support.is_finite() && (0.0..=0.5).contains(&self.min_support)) {
+        if !MIN_SUPPORT.contains(self.min_support) {
             return err(
                 "min-support",
                 self.min_support.to_string(),
                 "a fraction of the data points in [0, 0.5]",
             );
         }
-        if !(1..=8).contains(&self.levels) {
+        if !LEVELS.contains(self.levels as f64) {
             return err("levels", self.levels.to_string(), "an integer in 1..=8");
         }
-        if !(16..=1 << 22).contains(&self.max_memory_mib) {
+        if !MAX_MEMORY_MIB.contains(self.max_memory_mib as f64) {
             return err(
                 "max-memory-mib",
                 self.max_memory_mib.to_string(),
@@ -428,12 +549,32 @@ impl TryFrom<&ReconOptions> for ReconParams {
     fn try_from(a: &ReconOptions) -> Result<Self, Self::Error> {
         let d = ReconParams::default();
         let support = match (a.support, a.neighbours) {
-            (Some(r), _) => Support::Radius(r),
+            (Some(_), Some(k)) => {
+                return Err(ParamError {
+                    name: "neighbours",
+                    value: k.to_string(),
+                    expected: "either support (a radius) or neighbours (a count), not both",
+                });
+            }
+            (Some(r), None) => Support::Radius(r),
             (None, Some(k)) => Support::Neighbours(k),
             (None, None) => d.support,
         };
+        let method = a.method.unwrap_or(d.method);
+        if method != Method::Csrbf
+            && let Some((name, value)) = a
+                .support
+                .map(|r| ("support", r.to_string()))
+                .or_else(|| a.neighbours.map(|k| ("neighbours", k.to_string())))
+        {
+            return Err(ParamError {
+                name,
+                value,
+                expected: "only with method csrbf (variational and mls choose their own scale)",
+            });
+        }
         let p = ReconParams {
-            method: a.method.unwrap_or(d.method),
+            method,
             kernel: a.kernel.unwrap_or(d.kernel),
             support,
             carrier: a.carrier.map_or(d.carrier, |kind| CarrierParams { kind }),
@@ -497,6 +638,26 @@ mod tests {
     use super::*;
 
     #[test]
+    fn every_listed_choice_parses_and_blocks_follow_the_pattern() {
+        for (name, values) in choices() {
+            for v in values {
+                let o: Result<ReconOptions, _> =
+                    serde_json::from_value(serde_json::json!({ name: v }));
+                assert!(o.is_ok(), "{name}={v}");
+            }
+        }
+        for (v, ok) in [
+            ("auto", true),
+            ("none", true),
+            ("1000", true),
+            ("999", false),
+        ] {
+            assert_eq!(v.parse::<crate::rbf::Blocks>().is_ok(), ok, "{v}");
+        }
+        assert!(SUPPORT.contains(2.0) && !SUPPORT.contains(0.0) && !SUPPORT.contains(f64::NAN));
+    }
+
+    #[test]
     fn options_map_to_params_with_defaults_and_validation() {
         let p = ReconParams::try_from(&ReconOptions::default()).unwrap();
         assert_eq!(p, ReconParams::default());
@@ -516,6 +677,18 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(ReconParams::try_from(&bad).unwrap_err().name, "resolution");
+        let both = ReconOptions {
+            support: Some(0.1),
+            neighbours: Some(20),
+            ..Default::default()
+        };
+        assert_eq!(ReconParams::try_from(&both).unwrap_err().name, "neighbours");
+        let global = ReconOptions {
+            method: Some(Method::Mls),
+            support: Some(0.1),
+            ..Default::default()
+        };
+        assert_eq!(ReconParams::try_from(&global).unwrap_err().name, "support");
         let round: ReconOptions =
             serde_json::from_str(&serde_json::to_string(&o).unwrap()).unwrap();
         assert_eq!(round, o);

@@ -216,8 +216,15 @@ pub struct Timings {
 /// Memory statistics.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct MemoryReport {
-    /// Peak resident set size of the process, MiB (Linux VmHWM; 0 where unknown).
+    /// Peak resident memory of this reconstruction, MiB (0 where unknown). On the command line the
+    /// process's high-water mark (Linux VmHWM: the process is the run); in the service the job's
+    /// own peak: the largest growth of the server's resident set over its level at the job's
+    /// start, sampled every 20 ms while the job runs.
     pub peak_rss_mib: f64,
+    /// The service only: the whole server process's high-water mark (VmHWM), MiB, which includes
+    /// earlier and concurrent jobs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub process_peak_rss_mib: Option<f64>,
 }
 
 /// Sparse-grid statistics.
@@ -254,13 +261,21 @@ pub struct PolygonizeReport {
 
 /// Peak resident set size of this process in MiB (reads `/proc/self/status`; 0 elsewhere).
 pub fn peak_rss_mib() -> f64 {
+    proc_status_kib("VmHWM:").map_or(0.0, |kb| kb as f64 / 1024.0)
+}
+
+/// Current resident set size of the process, KiB (Linux VmRSS; `None` where unknown).
+pub fn current_rss_kib() -> Option<u64> {
+    proc_status_kib("VmRSS:")
+}
+
+fn proc_status_kib(key: &str) -> Option<u64> {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
             s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
+                .find(|l| l.starts_with(key))
                 .and_then(|l| l.split_whitespace().nth(1))
-                .and_then(|kb| kb.parse::<f64>().ok())
+                .and_then(|kb| kb.parse::<u64>().ok())
         })
-        .map_or(0.0, |kb| kb / 1024.0)
 }

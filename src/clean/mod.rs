@@ -118,6 +118,11 @@ pub fn clean_cloud(
         return Err(InputError::NoFinitePoints { total });
     }
     let pts: Vec<Point3> = finite.iter().map(|&i| cloud.points[i]).collect();
+    // A collinear cloud is refused before the duplicate merge: one O(n) pass instead of a tree
+    // over points that all lie on one line (merging cannot make a cloud less collinear).
+    if pts.len() >= 4 && is_collinear(&pts) {
+        return Err(InputError::Collinear { n: pts.len() });
+    }
     // A zero diagonal (all points equal) still merges exact duplicates.
     let tol = (params.merge_tolerance * Aabb::from_points(&pts).diagonal()).max(f64::MIN_POSITIVE);
     let keep: Vec<bool> = if params.merge_tolerance > 0.0 {
@@ -176,6 +181,14 @@ pub fn clean_cloud(
         crs,
     };
     Ok((kept_cloud, stats))
+}
+
+/// True when the points span a line (or a single point counts as not collinear: the merge makes
+/// it one point, refused as too few). Linear time.
+fn is_collinear(points: &[Point3]) -> bool {
+    let p = pca(points);
+    let l0 = p.variances[0];
+    l0 > 0.0 && p.variances[1].max(0.0).sqrt() <= 1e-7 * l0.sqrt()
 }
 
 /// Refuse clouds with fewer than 4 points, collinear clouds, and coplanar clouds without normals.

@@ -62,6 +62,7 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         format,
         report: a.report.as_deref(),
         field: a.save_field.as_deref(),
+        job_memory_mib: None,
     };
     let progress = BarProgress::new(a.quiet);
     let summary = pipeline::run(

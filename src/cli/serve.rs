@@ -27,15 +27,29 @@ pub struct ServeArgs {
     /// Largest point count per upload [default: 5000000].
     #[arg(long)]
     pub max_points: Option<usize>,
+    /// Memory budget of one job in MiB; a request's max-memory-mib can only lower it, and jobs
+    /// estimated above it are refused with 422 at submit [default: 8192].
+    #[arg(long)]
+    pub max_memory_mib: Option<u64>,
+    /// Largest resolution a request may ask for [default: 1024].
+    #[arg(long)]
+    pub max_resolution: Option<usize>,
+    /// Slowest accepted upload in KiB/s (after the first 5 s); connections idle for 5 s are closed [default: 64].
+    #[arg(long)]
+    pub min_upload_kib_s: Option<u64>,
     /// A running job fails after this many seconds [default: 600].
     #[arg(long)]
     pub job_timeout_s: Option<u64>,
     /// Delete finished jobs this many hours after they finished; 0 keeps them [default: 168].
     #[arg(long)]
     pub expire_hours: Option<u64>,
-    /// Bearer token required on POST and DELETE (or set RBFSURF_TOKEN) [default: none].
-    #[arg(long)]
+    /// Bearer token required on POST, DELETE and the job list (visible in the process list:
+    /// prefer --token-file or the RBFSURF_TOKEN environment variable) [default: none].
+    #[arg(long, conflicts_with = "token_file")]
     pub token: Option<String>,
+    /// Read the bearer token from this file (its first line) [default: none].
+    #[arg(long)]
+    pub token_file: Option<PathBuf>,
     /// Allow cross-origin requests from this origin (repeatable; `*` = any) [default: none].
     #[arg(long = "cors-origin")]
     pub cors_origins: Vec<String>,
@@ -57,18 +71,37 @@ impl ServeArgs {
         if timeout == 0 {
             bail!("--job-timeout-s 0: give a positive number of seconds");
         }
-        let token = self
-            .token
-            .clone()
-            .or_else(|| std::env::var("RBFSURF_TOKEN").ok())
-            .filter(|t| !t.is_empty());
+        let max_queue = self.max_queue.unwrap_or(d.max_queue);
+        if max_queue == 0 {
+            bail!("--max-queue 0 would refuse every job: use 1 or more");
+        }
+        let max_memory_mib = self.max_memory_mib.unwrap_or(d.max_memory_mib);
+        if !(16..=1 << 22).contains(&max_memory_mib) {
+            bail!("--max-memory-mib {max_memory_mib}: use 16..=4194304");
+        }
+        let max_resolution = self.max_resolution.unwrap_or(d.max_resolution);
+        if !(8..=4096).contains(&max_resolution) {
+            bail!("--max-resolution {max_resolution}: use 8..=4096");
+        }
+        let min_rate = self.min_upload_kib_s.unwrap_or(d.min_upload_rate >> 10);
+        if min_rate == 0 {
+            bail!(
+                "--min-upload-kib-s 0: give a positive rate (slow uploads hold memory and slots)"
+            );
+        }
+        let token = self.token()?;
         Ok(ServerConfig {
             addr: self.addr.unwrap_or(d.addr),
             data_dir: self.data_dir.clone().unwrap_or(d.data_dir),
             workers,
-            max_queue: self.max_queue.unwrap_or(d.max_queue),
+            max_queue,
             max_upload_bytes: mib << 20,
             max_points: self.max_points.unwrap_or(d.max_points),
+            max_memory_mib,
+            max_resolution,
+            idle_timeout: d.idle_timeout,
+            min_upload_rate: min_rate << 10,
+            upload_slot_wait: d.upload_slot_wait,
             job_timeout: Duration::from_secs(timeout),
             expire_after: match self.expire_hours {
                 Some(0) => None,
@@ -79,6 +112,28 @@ impl ServeArgs {
             cors_origins: self.cors_origins.clone(),
             max_wait: d.max_wait,
         })
+    }
+}
+
+impl ServeArgs {
+    /// The token from --token, --token-file or RBFSURF_TOKEN (in that order); empty = none.
+    fn token(&self) -> Result<Option<String>> {
+        let token = match (&self.token, &self.token_file) {
+            (Some(t), _) => Some(t.clone()),
+            (None, Some(path)) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("--token-file {}", path.display()))?;
+                let line = text.lines().next().unwrap_or("").trim().to_string();
+                if line.is_empty() {
+                    bail!("--token-file {}: the file is empty", path.display());
+                }
+                Some(line)
+            }
+            (None, None) => std::env::var("RBFSURF_TOKEN").ok(),
+        };
+        Ok(token
+            .map(|t| t.trim().to_string())
+            .filter(|t| !t.is_empty()))
     }
 }
 

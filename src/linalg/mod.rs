@@ -295,6 +295,46 @@ fn validate(a: &CsMat<f64>, perm: Option<&[usize]>) -> Result<usize, LinalgError
     Ok(n)
 }
 
+/// Runs `work` on a helper thread and waits for its result, polling `progress.cancelled()` every
+/// 20 ms: a cancellation answers [`LinalgError::Cancelled`] within that period even while a
+/// single uninterruptible library call (a dense or supernodal factorisation) is running. The
+/// abandoned work finishes in the background, on a thread pool of its own (the shared rayon pool
+/// stays free for the next job), and its result (and memory) is dropped then.
+pub(crate) fn run_abandonable<T: Send + 'static>(
+    progress: &dyn Progress,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, LinalgError> {
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    // A pool of its own: abandoned work must not hold the shared rayon pool's threads, or the
+    // next job's parallel stages would wait for it.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(rayon::current_num_threads())
+        .thread_name(|i| format!("rbfsurf-factor-{i}"))
+        .build()
+        .map_err(|e| LinalgError::Backend(format!("cannot start the factorisation pool: {e}")))?;
+    std::thread::Builder::new()
+        .name("rbfsurf-factor".into())
+        .spawn(move || {
+            let _ = tx.send(pool.install(work));
+        })
+        .map_err(|e| LinalgError::Backend(format!("cannot start the factorisation thread: {e}")))?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(20)) {
+            Ok(v) => return Ok(v),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                if progress.cancelled() {
+                    return Err(LinalgError::Cancelled);
+                }
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(LinalgError::Backend(
+                    "the factorisation thread stopped without a result (a panic)".into(),
+                ));
+            }
+        }
+    }
+}
+
 /// Factorises the SPD matrix `a` (n × n, full symmetric, CSC with sorted indices).
 ///
 /// `perm` is an optional ordering (`perm[new] = old`) used by [`SolverKind::Envelope`] and

@@ -58,6 +58,26 @@ pub(crate) fn estimate_sparse(a: &CsMat<f64>) -> Result<usize, LinalgError> {
     Ok(symbolic(&to_faer(a))?.len_val())
 }
 
+/// faer's pivot failure in the original numbering.
+fn not_positive_definite(symb: &SymbolicCholesky<usize>, e: LltError) -> LinalgError {
+    match e {
+        LltError::NonPositivePivot { index } => {
+            // faer 0.24 reports the simplicial pivot one-based and the supernodal one
+            // zero-based, both in the AMD-permuted numbering.
+            let index = match symb.raw() {
+                SymbolicCholeskyRaw::Simplicial(_) => index.saturating_sub(1),
+                SymbolicCholeskyRaw::Supernodal(_) => index,
+            };
+            LinalgError::NotPositiveDefinite {
+                pivot: symb
+                    .perm()
+                    .and_then(|p| p.arrays().0.get(index).copied())
+                    .unwrap_or(index),
+            }
+        }
+    }
+}
+
 /// AMD + symbolic, size check, then the numeric LLᵀ.
 pub(crate) fn factorize_sparse(
     a: &CsMat<f64>,
@@ -75,38 +95,31 @@ pub(crate) fn factorize_sparse(
         return Err(LinalgError::Cancelled);
     }
     let t1 = Instant::now();
-    let par = faer::get_global_parallelism();
-    let req = symb.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-    let mut buf = MemBuffer::try_new(req)
-        .map_err(|_| LinalgError::Backend("faer: cannot allocate the workspace".into()))?;
-    let mut values = vec![0.0f64; len];
-    let result = symb.factorize_numeric_llt(
-        &mut values,
-        af.as_ref(),
-        Side::Lower,
-        LltRegularization::default(),
-        par,
-        MemStack::new(&mut buf),
-        Default::default(),
-    );
-    if let Err(e) = result {
-        return Err(match e {
-            LltError::NonPositivePivot { index } => {
-                // faer 0.24 reports the simplicial pivot one-based and the supernodal one
-                // zero-based, both in the AMD-permuted numbering.
-                let index = match symb.raw() {
-                    SymbolicCholeskyRaw::Simplicial(_) => index.saturating_sub(1),
-                    SymbolicCholeskyRaw::Supernodal(_) => index,
-                };
-                LinalgError::NotPositiveDefinite {
-                    pivot: symb
-                        .perm()
-                        .and_then(|p| p.arrays().0.get(index).copied())
-                        .unwrap_or(index),
-                }
-            }
-        });
-    }
+    // faer's numeric factorisation is one uninterruptible call: large ones run on a helper thread
+    // so that a cancellation is answered at once (see `run_abandonable`).
+    let numeric = move || -> Result<(SymbolicCholesky<usize>, Vec<f64>), LinalgError> {
+        let par = faer::get_global_parallelism();
+        let req = symb.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+        let mut buf = MemBuffer::try_new(req)
+            .map_err(|_| LinalgError::Backend("faer: cannot allocate the workspace".into()))?;
+        let mut values = vec![0.0f64; len];
+        symb.factorize_numeric_llt(
+            &mut values,
+            af.as_ref(),
+            Side::Lower,
+            LltRegularization::default(),
+            par,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| not_positive_definite(&symb, e))?;
+        Ok((symb, values))
+    };
+    let (symb, values) = if len > 1 << 21 {
+        super::run_abandonable(progress, numeric)??
+    } else {
+        numeric()?
+    };
     let numeric_s = t1.elapsed().as_secs_f64();
     progress.fraction(1.0);
     if progress.cancelled() {

@@ -106,7 +106,7 @@ pub fn fit_field(
         finest_support: support.radius,
     });
     let t = Instant::now();
-    let residual = residual_at(field.as_ref(), &points);
+    let residual = residual_at(field.as_ref(), &points, progress)?;
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         far_field,

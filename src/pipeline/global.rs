@@ -10,7 +10,7 @@ use crate::progress::Progress;
 use crate::rbf::{Support, estimate_support};
 use crate::report::{MatrixReport, Timings};
 use crate::spatial::{IndexKind, build_index};
-use crate::variational::{VariationalParams, fit_mls_3d, fit_variational_3d};
+use crate::variational::{VariationalParams, fit_mls_3d, fit_variational_3d_with};
 use std::time::Instant;
 
 /// Fit Turk–O'Brien (`r³`, pseudo-normals, dense LBLᵀ) or Shen's MLS to the cleaned, normalised cloud.
@@ -41,7 +41,7 @@ pub(super) fn fit_global(
                 MatrixReport::default(),
             ),
             _ => {
-                let f = fit_variational_3d(&points, normals, &vp)?;
+                let f = fit_variational_3d_with(&points, normals, &vp, progress)?;
                 let n = f.fit.info.unknowns;
                 let dense = MatrixReport {
                     n,
@@ -59,7 +59,7 @@ pub(super) fn fit_global(
         };
     timings.factor = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let residual = residual_at(field.as_ref(), &points);
+    let residual = residual_at(field.as_ref(), &points, progress)?;
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         far_field: None,

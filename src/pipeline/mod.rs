@@ -168,6 +168,7 @@ fn reconstruct_inner(
         timings_s: timings,
         memory: crate::report::MemoryReport {
             peak_rss_mib: peak_rss_mib(),
+            process_peak_rss_mib: None,
         },
         polygonize,
         attributes,
@@ -322,12 +323,22 @@ pub(crate) fn check_cancel(progress: &dyn Progress) -> Result<(), ReconError> {
 }
 
 /// RMS and max of `|f(P_i)|` over the data points (evaluated in parallel, summed in order so the
-/// result does not depend on the thread schedule).
-pub fn residual_at(field: &dyn ScalarField, points: &[Point3]) -> ResidualReport {
-    let r: Vec<f64> = points.par_iter().map(|p| field.value(p).abs()).collect();
+/// result does not depend on the thread schedule). Stops with [`ReconError::Cancelled`] within one
+/// chunk of 1024 evaluations of a cancel (a dense field costs O(n) per evaluation).
+pub fn residual_at(
+    field: &dyn ScalarField,
+    points: &[Point3],
+    progress: &dyn Progress,
+) -> Result<ResidualReport, ReconError> {
+    let r: Vec<Option<Vec<f64>>> = points
+        .par_chunks(1024)
+        .map(|c| (!progress.cancelled()).then(|| c.iter().map(|p| field.value(p).abs()).collect()))
+        .collect();
+    check_cancel(progress)?;
+    let r: Vec<f64> = r.into_iter().flatten().flatten().collect();
     let sum2: f64 = r.iter().map(|v| v * v).sum();
-    ResidualReport {
+    Ok(ResidualReport {
         rms: (sum2 / points.len().max(1) as f64).sqrt(),
         max: r.iter().fold(0.0f64, |m, &v| m.max(v)),
-    }
+    })
 }

@@ -40,7 +40,7 @@ impl PointSource<'_> {
 }
 
 /// Where the results go.
-#[derive(Debug, Clone, Copy)]
+#[derive(Clone, Copy)]
 pub struct RunOutput<'a> {
     /// The mesh file.
     pub mesh: &'a Path,
@@ -50,6 +50,24 @@ pub struct RunOutput<'a> {
     pub report: Option<&'a Path>,
     /// The fitted field in the `.field` format ([`crate::frep::format`]), when wanted (CSRBF only).
     pub field: Option<&'a Path>,
+    /// The caller's own measure of this run's peak memory, MiB (a server running several jobs in
+    /// one process); `None`: the process's high-water mark is the run's.
+    pub job_memory_mib: Option<&'a (dyn Fn() -> f64 + Sync)>,
+}
+
+impl std::fmt::Debug for RunOutput<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunOutput")
+            .field("mesh", &self.mesh)
+            .field("format", &self.format)
+            .field("report", &self.report)
+            .field("field", &self.field)
+            .field(
+                "job_memory_mib",
+                &self.job_memory_mib.map(|_| "caller's measure"),
+            )
+            .finish()
+    }
 }
 
 /// What a finished run produced (the files are written).
@@ -148,7 +166,9 @@ pub fn run(
     rec.report.timings_s.read = read_s;
     rec.report.timings_s.write = t.elapsed().as_secs_f64();
     rec.report.timings_s.total = start.elapsed().as_secs_f64();
-    rec.report.memory.peak_rss_mib = peak_rss_mib();
+    let process = peak_rss_mib();
+    rec.report.memory.peak_rss_mib = output.job_memory_mib.map_or(process, |f| f());
+    rec.report.memory.process_peak_rss_mib = output.job_memory_mib.map(|_| process);
     if let Some(path) = output.report {
         let json = serde_json::to_vec_pretty(&rec.report).map_err(|e| {
             RunError::Write(IoError::Encode {

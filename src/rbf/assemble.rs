@@ -29,25 +29,25 @@ pub fn assemble_matrix(
     let chunks: Vec<Result<Vec<Column>, RbfError>> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
-            if progress.cancelled() {
-                return Err(RbfError::Cancelled);
-            }
             let mut hits = Vec::new();
-            let cols = (c * CHUNK..((c + 1) * CHUNK).min(n))
-                .map(|i| {
-                    index.within(&points[i], support, &mut hits);
-                    let mut col: Vec<(usize, f64)> = hits
-                        .iter()
-                        .filter_map(|&j| {
-                            let d2 = dist2(points[i], points[j as usize]);
-                            let shift = if j as usize == i { smoothing } else { 0.0 };
-                            (d2 < r2).then(|| (j as usize, kernel.value(d2.sqrt() * inv_r) + shift))
-                        })
-                        .collect();
-                    col.sort_unstable_by_key(|e| e.0);
-                    col
-                })
-                .collect();
+            let mut cols = Vec::with_capacity(CHUNK);
+            for i in c * CHUNK..((c + 1) * CHUNK).min(n) {
+                // Dense rows (a large support) make one column cost up to O(n): check often.
+                if i % 32 == 0 && progress.cancelled() {
+                    return Err(RbfError::Cancelled);
+                }
+                index.within(&points[i], support, &mut hits);
+                let mut col: Vec<(usize, f64)> = hits
+                    .iter()
+                    .filter_map(|&j| {
+                        let d2 = dist2(points[i], points[j as usize]);
+                        let shift = if j as usize == i { smoothing } else { 0.0 };
+                        (d2 < r2).then(|| (j as usize, kernel.value(d2.sqrt() * inv_r) + shift))
+                    })
+                    .collect();
+                col.sort_unstable_by_key(|e| e.0);
+                cols.push(col);
+            }
             progress.fraction((c + 1) as f64 * CHUNK as f64 / n as f64);
             Ok(cols)
         })

@@ -21,11 +21,25 @@ pub struct ServerConfig {
     pub max_upload_bytes: u64,
     /// Largest accepted point count per upload (default 5,000,000).
     pub max_points: usize,
+    /// Memory budget of one job, MiB (default 8192). A request's `max-memory-mib` can only lower
+    /// it; jobs whose estimate exceeds it are refused at submit with 422 `system_too_large`.
+    pub max_memory_mib: u64,
+    /// Largest marching-grid resolution a request may ask for (default 1024).
+    pub max_resolution: usize,
+    /// A connection that sends no byte for this long while the server waits for its request
+    /// (headers or body) is closed (default 5 s).
+    pub idle_timeout: Duration,
+    /// Slowest accepted upload, bytes per second averaged from the start of the body; slower
+    /// uploads are refused with 408 (default 64 KiB/s; checked after the first `idle_timeout`).
+    pub min_upload_rate: u64,
+    /// How long an upload waits for a free receive slot before it is answered 429 `busy`
+    /// (default 30 s).
+    pub upload_slot_wait: Duration,
     /// A running job is stopped and failed after this long (default 600 s).
     pub job_timeout: Duration,
     /// Finished jobs (and their files) are deleted this long after they finished; `None` keeps them.
     pub expire_after: Option<Duration>,
-    /// Bearer token required on mutating endpoints (POST, DELETE); `None` leaves them open.
+    /// Bearer token required on POST, DELETE and the job list; `None` leaves them open.
     pub token: Option<String>,
     /// Origins allowed by CORS (`*` = any); empty = no CORS headers.
     pub cors_origins: Vec<String>,
@@ -42,6 +56,11 @@ impl Default for ServerConfig {
             max_queue: 16,
             max_upload_bytes: 256 << 20,
             max_points: 5_000_000,
+            max_memory_mib: 8192,
+            max_resolution: 1024,
+            idle_timeout: Duration::from_secs(5),
+            min_upload_rate: 64 << 10,
+            upload_slot_wait: Duration::from_secs(30),
             job_timeout: Duration::from_secs(600),
             expire_after: Some(Duration::from_secs(7 * 24 * 3600)),
             token: None,

@@ -10,9 +10,12 @@ use serde::{Deserialize, Serialize};
 /// The JSON error object (`error` member of every error response, and of a failed job).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct ErrorBody {
-    /// Stable identifier: `bad_parameter`, `unauthorized`, `not_found`, `too_large`,
-    /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`, `queue_full`, `busy`,
-    /// `shutting_down`, `job_timeout`, `cancelled`, `internal`, ...
+    /// Stable identifier: `bad_parameter`, `bad_multipart`, `incomplete_body`, `upload_too_slow`,
+    /// `unauthorized`, `not_found`, `not_ready`, `method_not_allowed`, `too_large`,
+    /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`,
+    /// `conflicting_parameters`, `unsuitable_parameter`,
+    /// `queue_full`, `busy`, `shutting_down`, `job_timeout`, `interrupted`, `cancelled`,
+    /// `reconstruction_failed`, `insufficient_storage`, `internal`.
     pub code: String,
     /// Human-readable explanation with a hint.
     pub message: String,
@@ -70,11 +73,27 @@ impl ApiError {
         Self::new(StatusCode::PAYLOAD_TOO_LARGE, "too_large", message)
     }
 
-    /// 500 `internal` (logged).
-    pub fn internal(message: impl Into<String>) -> Self {
-        let message = message.into();
-        tracing::error!(%message, "internal error");
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+    /// 500 `internal`: the detail (which may name server paths) goes to the server log under a
+    /// fresh error id; the client gets a generic message with that id.
+    pub fn internal(detail: impl Into<String>) -> Self {
+        let body = internal_body(&detail.into());
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, &body.code, body.message)
+    }
+
+    /// 507 `insufficient_storage` (the data directory's disk or quota is full); the detail is
+    /// logged under an error id, as for [`ApiError::internal`].
+    pub fn insufficient_storage(detail: impl Into<String>) -> Self {
+        let body = storage_body(&detail.into());
+        Self::new(StatusCode::INSUFFICIENT_STORAGE, &body.code, body.message).retry_after(60)
+    }
+
+    /// A file-system failure of the server: 507 when the disk is full, else 500.
+    pub fn from_io(context: &str, e: &std::io::Error) -> Self {
+        if storage_full(e) {
+            Self::insufficient_storage(format!("{context}: {e}"))
+        } else {
+            Self::internal(format!("{context}: {e}"))
+        }
     }
 
     /// Adds `Retry-After: secs`.
@@ -115,6 +134,66 @@ impl IntoResponse for ApiError {
     }
 }
 
+/// A short random id that ties a client's error to the server log line with the details.
+pub fn error_id() -> String {
+    uuid::Uuid::new_v4().simple().to_string()[..12].to_string()
+}
+
+/// Logs `detail` under a new error id and returns the generic `internal` body naming that id.
+pub fn internal_body(detail: &str) -> ErrorBody {
+    let id = error_id();
+    tracing::error!(error_id = %id, %detail, "internal error");
+    ErrorBody {
+        code: "internal".into(),
+        message: format!(
+            "internal server error (error id {id}; the operator finds the details in the server log)"
+        ),
+    }
+}
+
+/// Logs `detail` under a new error id and returns the `insufficient_storage` body.
+pub fn storage_body(detail: &str) -> ErrorBody {
+    let id = error_id();
+    tracing::error!(error_id = %id, %detail, "storage full");
+    ErrorBody {
+        code: "insufficient_storage".into(),
+        message: format!(
+            "the server's storage is full; retry later or ask the operator to free space (error id {id})"
+        ),
+    }
+}
+
+/// True for "no space left on device" and "disk quota exceeded".
+pub fn storage_full(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+    ) || matches!(e.raw_os_error(), Some(28 | 122))
+}
+
+/// True when a library I/O error is the disk being full.
+pub fn io_storage_full(e: &crate::io::IoError) -> bool {
+    use crate::io::IoError as E;
+    match e {
+        E::Write { source, .. } | E::Read { source, .. } | E::Open { source, .. } => {
+            storage_full(source)
+        }
+        _ => false,
+    }
+}
+
+/// The HTTP status of a stored job's error code (the answer of `POST ?wait` for a failed job):
+/// 4xx for the input, the parameters and the limits (`job_timeout` is 422 like any other limit),
+/// 409 cancelled, 507 a full disk, 500 the server's fault (`internal`, `reconstruction_failed`,
+/// `interrupted` and unknown codes).
+pub fn status_of_code(code: &str) -> StatusCode {
+    match code {
+        "job_timeout" => StatusCode::UNPROCESSABLE_ENTITY,
+        "insufficient_storage" => StatusCode::INSUFFICIENT_STORAGE,
+        _ => ErrorKind::from_code(code).map_or(StatusCode::INTERNAL_SERVER_ERROR, status_of),
+    }
+}
+
 /// The HTTP status of a failure of this kind: 400 parameters, 415 format, 413 size, 422 data that
 /// cannot be reconstructed or would not fit the budget, 409 cancelled, 500 the machine's fault.
 pub fn status_of(kind: ErrorKind) -> StatusCode {
@@ -135,6 +214,9 @@ impl From<crate::io::IoError> for ApiError {
     /// `system_too_large`, anything else about the bytes → 422; open/read failures → 500.
     fn from(e: crate::io::IoError) -> Self {
         match e.kind() {
+            ErrorKind::Internal if io_storage_full(&e) => {
+                ApiError::insufficient_storage(e.to_string())
+            }
             ErrorKind::Internal => ApiError::internal(e.to_string()),
             kind => ApiError::new(status_of(kind), kind.code(), e.to_string()),
         }

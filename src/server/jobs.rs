@@ -128,7 +128,7 @@ pub enum SubmitError {
     /// The server is shutting down.
     ShuttingDown,
     /// The job could not be stored.
-    Storage(String),
+    Storage(crate::io::IoError),
 }
 
 impl From<SubmitError> for ApiError {
@@ -146,7 +146,7 @@ impl From<SubmitError> for ApiError {
                 "the server is shutting down; retry against the restarted server",
             )
             .retry_after(10),
-            SubmitError::Storage(m) => ApiError::internal(m),
+            SubmitError::Storage(e) => ApiError::from(e),
         }
     }
 }
@@ -250,7 +250,7 @@ impl JobManager {
         }
         if let Err(e) = self.store.create(&view, input, options) {
             let _ = self.store.remove(view.id);
-            return Err(SubmitError::Storage(e.to_string()));
+            return Err(SubmitError::Storage(e));
         }
         let job = Job::new(view);
         write(&self.jobs).insert(job.id, Arc::clone(&job));
@@ -287,19 +287,30 @@ impl JobManager {
         lock(&self.queue).len()
     }
 
-    /// Cancels a queued or running job (a running one stops at its next progress poll).
-    /// Returns false when the job had already finished.
+    /// Cancels a queued or running job (a running one stops at its next progress poll, within
+    /// about 20 ms in every long stage). Returns false when the job had already finished.
+    ///
+    /// The check and the flag are set under the job state's lock, and [`JobManager::finish`]
+    /// decides under the same lock: a job this returns true for never ends `succeeded`.
     pub fn cancel(&self, job: &Arc<Job>) -> bool {
-        job.cancel.store(true, Ordering::SeqCst);
+        let mut accepted = false;
+        job.tx.send_if_modified(|v| {
+            if !v.status.is_terminal() {
+                job.cancel.store(true, Ordering::SeqCst);
+                accepted = true;
+            }
+            false
+        });
+        if !accepted {
+            return false;
+        }
         let mut queue = lock(&self.queue);
         if let Some(pos) = queue.iter().position(|j| j.id == job.id) {
             queue.remove(pos);
             drop(queue);
             self.finish(job, JobStatus::Cancelled, Some(cancelled_error()), None);
-            return true;
         }
-        drop(queue);
-        !job.view().status.is_terminal()
+        true
     }
 
     /// Deletes a finished job and its files.
@@ -391,7 +402,7 @@ impl JobManager {
             last_percent: AtomicU64::new(0),
             current: Mutex::new(None),
         };
-        match self.reconstruct_job(job, &progress) {
+        match self.reconstruct_sampled(job, &progress) {
             Ok(triangles) => self.finish(job, JobStatus::Succeeded, None, Some(triangles)),
             Err(JobError::Stopped)
                 if self.shutdown.load(Ordering::SeqCst) && !job.cancel.load(Ordering::SeqCst) =>
@@ -424,9 +435,38 @@ impl JobManager {
         tracing::info!(id = %job.id, status = ?job.view().status, secs = started.elapsed().as_secs_f64(), "job ended");
     }
 
+    /// [`JobManager::reconstruct_job`] with the job's own memory measured: a thread samples the
+    /// resident set every 20 ms; the job's peak is the largest growth over the level at its start.
+    fn reconstruct_sampled(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
+        let rss = || crate::report::current_rss_kib().unwrap_or(0);
+        let base = rss();
+        let peak = AtomicU64::new(base);
+        let done = AtomicBool::new(false);
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                while !done.load(Ordering::Relaxed) {
+                    peak.fetch_max(rss(), Ordering::Relaxed);
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            });
+            let job_mib = || {
+                let p = peak.fetch_max(rss(), Ordering::Relaxed).max(rss());
+                p.saturating_sub(base) as f64 / 1024.0
+            };
+            let result = self.reconstruct_job(job, progress, &job_mib);
+            done.store(true, Ordering::Relaxed);
+            result
+        })
+    }
+
     /// Reads the stored input, reconstructs, writes `mesh.glb` and `report.json`
     /// ([`crate::pipeline::run`]).
-    fn reconstruct_job(&self, job: &Job, progress: &JobProgress) -> Result<usize, JobError> {
+    fn reconstruct_job(
+        &self,
+        job: &Job,
+        progress: &JobProgress,
+        job_mib: &(dyn Fn() -> f64 + Sync),
+    ) -> Result<usize, JobError> {
         let view = job.view();
         if [super::volume::COMPOSITION, super::volume::MORPH].contains(&view.input.format.as_str())
         {
@@ -462,6 +502,7 @@ impl JobManager {
             format: MeshFormat::Glb,
             report: Some(&report),
             field: (params.method == crate::params::Method::Csrbf).then_some(field.as_path()),
+            job_memory_mib: Some(job_mib),
         };
         let source = PointSource::Bytes {
             data: &data,
@@ -474,7 +515,16 @@ impl JobManager {
             Err(e) if e.kind() == ErrorKind::Cancelled || progress.cancelled() => {
                 Err(JobError::Stopped)
             }
-            Err(e @ RunError::Write(_)) => Err(JobError::internal(e.to_string())),
+            Err(RunError::Write(e)) if super::error::io_storage_full(&e) => Err(JobError::Failed(
+                super::error::storage_body(&format!("job {}: {e}", job.id)),
+            )),
+            // The readers' and writers' messages name server paths: the client gets the generic
+            // message, the log the details. (Numerical failures name none and keep theirs.)
+            Err(e @ (RunError::Read(_) | RunError::Write(_)))
+                if e.kind() == ErrorKind::Internal =>
+            {
+                Err(JobError::internal(format!("job {}: {e}", job.id)))
+            }
             Err(e) => Err(JobError::Failed(ErrorBody {
                 code: e.kind().code().into(),
                 message: e.to_string(),
@@ -483,7 +533,8 @@ impl JobManager {
     }
 
     /// Stores the terminal state first, then publishes it: whoever sees it (a `?wait`, a DELETE,
-    /// expiry) finds the files complete.
+    /// expiry) finds the files complete. Decided under the job state's lock (see
+    /// [`JobManager::cancel`]): a success that races a cancel ends `cancelled`, without results.
     fn finish(
         &self,
         job: &Job,
@@ -491,19 +542,32 @@ impl JobManager {
         error: Option<ErrorBody>,
         triangles: Option<usize>,
     ) {
-        let mut v = job.view();
-        v.status = status;
-        v.finished_at = Some(unix_now());
-        v.error = error;
-        v.triangles = triangles;
-        if status == JobStatus::Succeeded {
-            v.progress = 1.0;
-            v.stage_progress = 1.0;
-        }
-        if let Err(e) = self.store.save_status(&v) {
-            tracing::error!(id = %job.id, error = %e, "cannot store job status");
-        }
-        job.tx.send_replace(v);
+        job.tx.send_if_modified(|v| {
+            if v.status.is_terminal() {
+                return false;
+            }
+            let cancelled = status == JobStatus::Succeeded && job.cancel.load(Ordering::SeqCst);
+            let (status, error, triangles) = if cancelled {
+                for name in ["mesh.glb", "report.json"] {
+                    let _ = std::fs::remove_file(self.store.file(job.id, name));
+                }
+                (JobStatus::Cancelled, Some(cancelled_error()), None)
+            } else {
+                (status, error, triangles)
+            };
+            v.status = status;
+            v.finished_at = Some(unix_now());
+            v.error = error;
+            v.triangles = triangles;
+            if status == JobStatus::Succeeded {
+                v.progress = 1.0;
+                v.stage_progress = 1.0;
+            }
+            if let Err(e) = self.store.save_status(v) {
+                tracing::error!(id = %job.id, error = %e, "cannot store job status");
+            }
+            true
+        });
     }
 
     fn persist(&self, job: &Job) {
@@ -521,13 +585,8 @@ enum JobError {
 }
 
 impl JobError {
-    fn internal(message: impl Into<String>) -> JobError {
-        let message = message.into();
-        tracing::error!(%message, "job failed internally");
-        JobError::Failed(ErrorBody {
-            code: "internal".into(),
-            message,
-        })
+    fn internal(detail: impl Into<String>) -> JobError {
+        JobError::Failed(super::error::internal_body(&detail.into()))
     }
 }
 

@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod error;
+pub mod feasibility;
 pub mod jobs;
 pub mod model;
 pub mod openapi;
@@ -99,6 +100,11 @@ pub async fn serve(cfg: ServerConfig) -> std::io::Result<()> {
 }
 
 /// Serves `state` on an already bound listener until `stop` completes (used by `serve` and tests).
+///
+/// Connections are served by hyper (HTTP/1.1) with a header read timeout of
+/// [`ServerConfig::idle_timeout`]: a client that has not sent a complete request head within it
+/// (a trickle, or an idle keep-alive connection) is disconnected. Bodies are guarded by the
+/// upload handler (no byte for `idle_timeout`, or slower than `min_upload_rate`: 408).
 pub async fn serve_on(
     listener: tokio::net::TcpListener,
     state: AppState,
@@ -106,9 +112,40 @@ pub async fn serve_on(
 ) -> std::io::Result<()> {
     let expiry = tokio::spawn(expire_loop(state.jobs.clone()));
     let jobs = state.jobs.clone();
-    let result = axum::serve(listener, router(state))
-        .with_graceful_shutdown(stop)
-        .await;
+    let idle = jobs.config().idle_timeout;
+    let app = router(state);
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let mut builder = hyper::server::conn::http1::Builder::new();
+    builder
+        .timer(hyper_util::rt::TokioTimer::new())
+        .header_read_timeout(idle);
+    tokio::pin!(stop);
+    let result = loop {
+        tokio::select! {
+            accepted = listener.accept() => {
+                let stream = match accepted {
+                    Ok((stream, _)) => stream,
+                    // Out of file descriptors and the like: keep serving the open connections.
+                    Err(e) => {
+                        tracing::warn!(error = %e, "accept failed");
+                        tokio::time::sleep(Duration::from_millis(50)).await;
+                        continue;
+                    }
+                };
+                let _ = stream.set_nodelay(true);
+                let io = hyper_util::rt::TokioIo::new(stream);
+                let service = hyper_util::service::TowerToHyperService::new(app.clone());
+                let conn = graceful.watch(builder.serve_connection(io, service));
+                tokio::spawn(async move {
+                    let _ = conn.await;
+                });
+            }
+            () = &mut stop => break Ok(()),
+        }
+    };
+    drop(listener);
+    // In-flight requests end (a `?wait` is bounded by `max_wait`; give them a few seconds).
+    let _ = tokio::time::timeout(Duration::from_secs(10), graceful.shutdown()).await;
     expiry.abort();
     tokio::task::spawn_blocking(move || jobs.shutdown())
         .await

@@ -13,7 +13,7 @@ use utoipa_axum::routes;
 #[openapi(
     info(title = "rbfsurf", description = "Watertight meshes from point clouds with compactly supported RBFs: upload a point file, follow the job, download the mesh and its report."),
     modifiers(&BearerAuth),
-    components(schemas(super::error::ErrorBody, super::jobs::JobStatus, super::jobs::InputInfo))
+    components(schemas(super::error::ErrorBody, super::jobs::JobStatus, super::jobs::InputInfo, super::jobs::JobView))
 )]
 struct ApiDoc;
 
@@ -48,18 +48,102 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(meta::viewer_js))
 }
 
-/// The OpenAPI document.
+/// The OpenAPI document: the handlers' annotations plus the parameter constraints
+/// ([`contract`]).
 pub fn openapi() -> utoipa::openapi::OpenApi {
+    serde_json::from_value(document()).unwrap_or_else(|_| api_router().split_for_parts().1)
+}
+
+fn document() -> serde_json::Value {
     let mut api = api_router().split_for_parts().1;
     api.info.version = env!("CARGO_PKG_VERSION").to_string();
-    api
+    let mut doc = serde_json::to_value(&api).unwrap_or_default();
+    contract(&mut doc);
+    doc
 }
 
 /// The OpenAPI document as pretty JSON with a trailing newline (the proto/openapi.json format).
 pub fn openapi_json() -> String {
-    let mut s = openapi()
-        .to_pretty_json()
+    let mut s = serde_json::to_string_pretty(&document())
         .unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"));
     s.push('\n');
     s
+}
+
+/// The JSON schema of query parameter `name`, from the one parameter definition
+/// ([`crate::params::RANGES`], [`crate::params::choices`]) that the server enforces.
+pub fn parameter_schema(name: &str) -> Option<serde_json::Value> {
+    use serde_json::json;
+    if name == "wait" {
+        return Some(json!({"type": "number", "minimum": 0}));
+    }
+    if name == "blocks" {
+        return Some(json!({"type": "string", "pattern": crate::params::BLOCKS_PATTERN}));
+    }
+    if let Some((_, values)) = crate::params::choices()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+    {
+        return Some(json!({"type": "string", "enum": values}));
+    }
+    let r = crate::params::RANGES.iter().find(|r| r.name == name)?;
+    let mut schema = json!({"type": if r.integer { "integer" } else { "number" }});
+    if r.integer {
+        schema["minimum"] = json!(r.min as u64);
+        if let Some(m) = r.max {
+            schema["maximum"] = json!(m as u64);
+        }
+    } else {
+        let key = if r.exclusive_min {
+            "exclusiveMinimum"
+        } else {
+            "minimum"
+        };
+        schema[key] = json!(r.min);
+        if let Some(m) = r.max {
+            schema["maximum"] = json!(m);
+        }
+    }
+    Some(schema)
+}
+
+/// What the annotations cannot say: every query parameter's type, range or enumeration, and the
+/// server-sent events' format.
+fn contract(doc: &mut serde_json::Value) {
+    let Some(paths) = doc.get_mut("paths").and_then(|p| p.as_object_mut()) else {
+        return;
+    };
+    for item in paths.values_mut() {
+        let Some(ops) = item.as_object_mut() else {
+            continue;
+        };
+        for op in ops.values_mut() {
+            let Some(params) = op.get_mut("parameters").and_then(|p| p.as_array_mut()) else {
+                continue;
+            };
+            for p in params {
+                if p["in"] != "query" {
+                    continue;
+                }
+                if let Some(schema) = p["name"].as_str().and_then(parameter_schema) {
+                    p["schema"] = schema;
+                }
+            }
+        }
+    }
+    let events = "/v1/reconstructions/{id}/events";
+    if let Some(ok) = paths
+        .get_mut(events)
+        .and_then(|i| i.pointer_mut("/get/responses/200"))
+    {
+        ok["content"] = serde_json::json!({
+            "text/event-stream": {
+                "schema": {
+                    "type": "string",
+                    "description": "A stream of server-sent events. Each event is `event: progress` (while the job is queued or running) or `event: done` (once, with the terminal state; the stream then ends), followed by `data: ` and the job as one line of JSON (schema JobView). Comment lines (`:`) keep the connection alive.",
+                },
+                "example": "event: progress\ndata: {\"id\":\"…\",\"status\":\"running\",\"stage\":\"factor\",\"progress\":0.42,…}\n\nevent: done\ndata: {\"id\":\"…\",\"status\":\"succeeded\",…}\n\n",
+            }
+        });
+    }
 }

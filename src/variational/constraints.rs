@@ -172,6 +172,7 @@ impl From<crate::linalg::LinalgError> for VariationalError {
             crate::linalg::LinalgError::SingularDense { n, rcond } => {
                 VariationalError::SingularSystem { n, rcond }
             }
+            crate::linalg::LinalgError::Cancelled => VariationalError::Cancelled,
             other => VariationalError::Solver(other),
         }
     }

@@ -14,7 +14,7 @@
 use super::ImplicitField;
 use super::constraints::{Sample, VariationalError};
 use super::mls::{MlsField, MlsParams, fit_mls};
-use super::turk_obrien::{TurkObrienFit, TurkObrienParams, fit_turk_obrien};
+use super::turk_obrien::{TurkObrienFit, TurkObrienParams};
 use crate::geometry::{Aabb, Point3};
 use crate::polygonize::ScalarField;
 
@@ -61,9 +61,20 @@ pub fn fit_variational_3d(
     normals: Option<&[Point3]>,
     params: &VariationalParams,
 ) -> Result<VariationalField3, VariationalError> {
+    fit_variational_3d_with(points, normals, params, &crate::progress::NoProgress)
+}
+
+/// [`fit_variational_3d`] that stops with [`VariationalError::Cancelled`] soon after
+/// `progress.cancelled()` turns true (also inside the dense factorisation).
+pub fn fit_variational_3d_with(
+    points: &[Point3],
+    normals: Option<&[Point3]>,
+    params: &VariationalParams,
+    progress: &dyn crate::progress::Progress,
+) -> Result<VariationalField3, VariationalError> {
     let s = samples_3d(points, normals)?;
     Ok(VariationalField3 {
-        fit: fit_turk_obrien(&s, &params.turk_obrien)?,
+        fit: super::turk_obrien::fit_turk_obrien_with(&s, &params.turk_obrien, progress)?,
     })
 }
 

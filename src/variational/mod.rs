@@ -33,12 +33,15 @@ pub use constraints::{
 pub use editing::{IncrementalReport, run_workbench_incremental};
 pub use field3d::{
     MlsField3, VariationalField3, VariationalParams, fit_mls_3d, fit_variational_3d,
+    fit_variational_3d_with,
 };
 pub use incremental::IncrementalSystem;
 pub use kernel::RadialKernel;
 pub use mlp::{MlpFit, MlpParams, Smoothing, fit_mlp};
 pub use mls::{MlsBasis, MlsField, MlsNormals, MlsParams, WeightPower, fit_mls};
-pub use turk_obrien::{NormalMode, TurkObrienFit, TurkObrienParams, fit_turk_obrien};
+pub use turk_obrien::{
+    NormalMode, TurkObrienFit, TurkObrienParams, fit_turk_obrien, fit_turk_obrien_with,
+};
 pub use workbench::{CurveMethod, CurveParams, CurveReport, WorkbenchOutput, run_workbench};
 
 /// A scalar field in `D` dimensions (input units), `f < 0` inside.

@@ -208,6 +208,16 @@ pub fn fit_turk_obrien<const D: usize>(
     samples: &[Sample<D>],
     params: &TurkObrienParams,
 ) -> Result<TurkObrienFit<D>, VariationalError> {
+    fit_turk_obrien_with(samples, params, &crate::progress::NoProgress)
+}
+
+/// [`fit_turk_obrien`] that stops with [`VariationalError::Cancelled`] within about 20 ms of
+/// `progress.cancelled()` turning true, also in the middle of the dense factorisation.
+pub fn fit_turk_obrien_with<const D: usize>(
+    samples: &[Sample<D>],
+    params: &TurkObrienParams,
+    progress: &dyn crate::progress::Progress,
+) -> Result<TurkObrienFit<D>, VariationalError> {
     validate_samples(samples)?;
     let frame = Frame::of_points(samples.iter().map(|s| s.p));
     let norm: Vec<Sample<D>> = frame.normalize_samples(samples);
@@ -226,17 +236,17 @@ pub fn fit_turk_obrien<const D: usize>(
         NormalMode::Pseudo(p) => {
             let c = expand_pseudo_normals(&norm, &p, 1.0)?;
             let rhs: Vec<Vec<f64>> = vec![c.iter().map(|v| v.value).collect()];
-            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns)?;
+            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns, progress)?;
             (parts, c, info)
         }
         NormalMode::MannFunctional => {
             let c = sample_constraints(&norm);
             let rhs = mann_rhs(&norm);
-            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns)?;
+            let (parts, info) = solve_values(&c, &rhs, kernel, params.max_unknowns, progress)?;
             (parts, c, info)
         }
         NormalMode::Hermite => {
-            let (part, info) = solve_hermite(&norm, kernel, params.max_unknowns)?;
+            let (part, info) = solve_hermite(&norm, kernel, params.max_unknowns, progress)?;
             (vec![part], sample_constraints(&norm), info)
         }
     };
@@ -246,12 +256,19 @@ pub fn fit_turk_obrien<const D: usize>(
         info,
         constraints,
     };
+    if progress.cancelled() {
+        return Err(VariationalError::Cancelled);
+    }
+    // O(n²) like the matrix: stops early (NaN) on a cancel, checked below.
     fit.info.max_residual = {
         use rayon::prelude::*;
         let f = &fit;
         f.constraints
             .par_chunks(256)
             .map(|cs| {
+                if progress.cancelled() {
+                    return f64::NAN;
+                }
                 let us: Vec<[f64; D]> = cs.iter().map(|c| c.p).collect();
                 let mut v = vec![0.0; us.len()];
                 f.values_normalized(&us, &mut v);
@@ -262,6 +279,9 @@ pub fn fit_turk_obrien<const D: usize>(
             })
             .reduce(|| 0.0, f64::max)
     };
+    if progress.cancelled() {
+        return Err(VariationalError::Cancelled);
+    }
     for c in &mut fit.constraints {
         c.p = frame.inverse(&c.p);
     }
@@ -295,8 +315,28 @@ fn mann_rhs<const D: usize>(s: &[Sample<D>]) -> Vec<Vec<f64>> {
 
 /// Assemble `[Φ P; Pᵀ 0]` (lower triangle) for value constraints.
 pub fn value_matrix<const D: usize>(pts: &[[f64; D]], kernel: RadialKernel) -> Mat<f64> {
+    lower_from_fn(pts.len() + D + 1, value_entry(pts, kernel))
+}
+
+/// [`value_matrix`] that stops on a cancel.
+fn value_matrix_cancellable<const D: usize>(
+    pts: &[[f64; D]],
+    kernel: RadialKernel,
+    progress: &dyn crate::progress::Progress,
+) -> Result<Mat<f64>, crate::linalg::LinalgError> {
+    crate::linalg::dense::lower_from_fn_cancellable(
+        pts.len() + D + 1,
+        value_entry(pts, kernel),
+        progress,
+    )
+}
+
+fn value_entry<const D: usize>(
+    pts: &[[f64; D]],
+    kernel: RadialKernel,
+) -> impl Fn(usize, usize) -> f64 + Sync + '_ {
     let n = pts.len();
-    lower_from_fn(n + D + 1, |i, j| {
+    move |i, j| {
         if i < n {
             let r2: f64 = (0..D).map(|k| (pts[i][k] - pts[j][k]).powi(2)).sum();
             kernel.phi_r2(r2)
@@ -305,7 +345,7 @@ pub fn value_matrix<const D: usize>(pts: &[[f64; D]], kernel: RadialKernel) -> M
         } else {
             0.0
         }
-    })
+    }
 }
 
 /// Solve the value system for several right-hand sides; one expansion per column.
@@ -314,6 +354,7 @@ fn solve_values<const D: usize>(
     rhs: &[Vec<f64>],
     kernel: RadialKernel,
     max_unknowns: usize,
+    progress: &dyn crate::progress::Progress,
 ) -> Result<(Vec<RbfExpansion<D>>, FitInfo), VariationalError> {
     let n = c.len();
     if n + D + 1 > max_unknowns {
@@ -325,7 +366,10 @@ fn solve_values<const D: usize>(
     let pts: Vec<[f64; D]> = c.iter().map(|v| v.p).collect();
     let rows: Vec<usize> = c.iter().map(|v| v.origin.row()).collect();
     check_affine_rank(&pts, &rows)?;
-    let solver = SymmetricSolver::new(&value_matrix(&pts, kernel))?;
+    let solver = SymmetricSolver::new_cancellable(
+        value_matrix_cancellable(&pts, kernel, progress)?,
+        progress,
+    )?;
     let mut b = Mat::<f64>::from_fn(
         n + D + 1,
         rhs.len(),
@@ -385,6 +429,7 @@ fn solve_hermite<const D: usize>(
     s: &[Sample<D>],
     kernel: RadialKernel,
     max_unknowns: usize,
+    progress: &dyn crate::progress::Progress,
 ) -> Result<(RbfExpansion<D>, FitInfo), VariationalError> {
     let mut funcs: Vec<Functional> = (0..s.len())
         .map(|point| Functional { point, axis: None })
@@ -422,7 +467,7 @@ fn solve_hermite<const D: usize>(
             0.0
         }
     });
-    let solver = SymmetricSolver::new(&a)?;
+    let solver = SymmetricSolver::new_cancellable(a, progress)?;
     let mut b = Mat::<f64>::from_fn(m + D + 1, 1, |i, _| match funcs.get(i) {
         Some(Functional { point, axis: None }) => s[*point].value,
         Some(Functional {

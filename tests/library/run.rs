@@ -15,6 +15,7 @@ fn output<'a>(mesh: &'a Path, report: &'a Path) -> RunOutput<'a> {
         format: MeshFormat::Glb,
         report: Some(report),
         field: None,
+        job_memory_mib: None,
     }
 }
 

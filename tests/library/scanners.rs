@@ -159,6 +159,7 @@ fn run_to(input: &Path, dir: &Path, name: &str, format: MeshFormat) -> rbfsurf::
         format,
         report: Some(&report),
         field: None,
+        job_memory_mib: None,
     };
     let p = ReconParams::default();
     run(

@@ -353,3 +353,23 @@ fn generate_outliers_holes_open_and_no_normals() {
         .unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("knot"));
 }
+
+#[test]
+fn serve_refuses_a_zero_queue_and_an_empty_token_file_at_start() {
+    let out = bin()
+        .args(["serve", "--max-queue", "0", "--addr", "127.0.0.1:0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--max-queue 0"), "{err}");
+    let empty = tmp("empty-token");
+    std::fs::write(&empty, "\n").unwrap();
+    let out = bin()
+        .args(["serve", "--addr", "127.0.0.1:0", "--token-file"])
+        .arg(&empty)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("empty"));
+}

@@ -5,11 +5,13 @@
 mod cli;
 #[path = "../common/mod.rs"]
 mod common;
+mod hostile;
 mod http;
 mod load;
 #[path = "../library/scanner_files.rs"]
 mod scanner_files;
 #[path = "../server_common/mod.rs"]
 mod server_common;
+mod stop;
 mod submit;
 mod volume;

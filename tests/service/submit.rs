@@ -68,7 +68,10 @@ async fn submit_exits_zero_only_on_success() {
     );
     let l = line.display().to_string();
     for (args, expect) in [
-        (s(&[&l, "--server", &u, "--token", "tok", "--wait"]), "422"),
+        (
+            s(&[&l, "--server", &u, "--token", "tok", "--wait"]),
+            "straight line",
+        ),
         (s(&[&c, "--server", &u, "--wait"]), "401"),
         (
             s(&[&c, "--server", &u, "--token", "tok", "--kernel", "gauss"]),

@@ -5,8 +5,10 @@
 
 pub mod meta;
 pub mod reconstructions;
+pub mod upload;
 pub mod volume;
 
+use super::config::ServerConfig;
 use super::error::ApiError;
 use super::jobs::{Job, JobView};
 use crate::params::{ReconOptions, ReconParams};
@@ -65,6 +67,7 @@ pub fn job_response(view: JobView, report: Option<serde_json::Value>) -> JobResp
 }
 
 /// 401 unless the request carries `Authorization: Bearer <token>` (when a token is configured).
+/// The scheme name is case-insensitive (RFC 7235 §2.1).
 pub fn authorize(token: Option<&str>, headers: &HeaderMap) -> Result<(), ApiError> {
     let Some(token) = token else {
         return Ok(());
@@ -72,19 +75,23 @@ pub fn authorize(token: Option<&str>, headers: &HeaderMap) -> Result<(), ApiErro
     let given = headers
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|s| s.strip_prefix("Bearer "))
+        .and_then(|s| {
+            let s = s.trim_start();
+            let (scheme, rest) = s.split_at_checked(6)?;
+            (scheme.eq_ignore_ascii_case("bearer") && rest.starts_with(' ')).then_some(rest)
+        })
         .map(str::trim);
     match given {
         Some(g) if constant_time_eq(g.as_bytes(), token.as_bytes()) => Ok(()),
         Some(_) => Err(ApiError::new(
             StatusCode::UNAUTHORIZED,
             "unauthorized",
-            "the bearer token is wrong; send Authorization: Bearer <the server's --token>",
+            "the bearer token is wrong; send Authorization: Bearer <the server's token>",
         )),
         None => Err(ApiError::new(
             StatusCode::UNAUTHORIZED,
             "unauthorized",
-            "this server requires a token on POST and DELETE; send Authorization: Bearer <token>",
+            "this server requires a token to submit, cancel, delete and list jobs; send Authorization: Bearer <token>",
         )),
     }
 }
@@ -114,9 +121,12 @@ pub fn query_pairs(raw: Option<&str>) -> Result<Pairs, ApiError> {
 }
 
 /// Splits off `wait` and converts the remaining pairs into validated options and parameters.
-/// Same names, spellings and ranges as the command line; unknown names are refused.
+/// Same names, spellings and ranges as the command line; unknown names are refused. The
+/// operator's limits are ceilings: the memory budget is the smaller of the request's and the
+/// server's (stored in the returned options), a resolution above the server's is refused (422).
 pub fn parse_params(
     pairs: &[(String, String)],
+    cfg: &ServerConfig,
 ) -> Result<(ReconOptions, ReconParams, f64), ApiError> {
     let mut wait = 0.0;
     let mut rest: Vec<&(String, String)> = Vec::new();
@@ -133,18 +143,82 @@ pub fn parse_params(
                         ))
                     })?;
         } else {
+            check_spelling(&p.0, &p.1)?;
             rest.push(p);
         }
     }
+    check_conflicts(&rest)?;
     let encoded =
         serde_urlencoded::to_string(&rest).map_err(|e| ApiError::bad_parameter(e.to_string()))?;
-    let options: ReconOptions = serde_urlencoded::from_str(&encoded).map_err(|e| {
+    let mut options: ReconOptions = serde_urlencoded::from_str(&encoded).map_err(|e| {
         ApiError::bad_parameter(format!(
             "invalid parameters: {e} (names and values as on the command line, e.g. resolution=64&kernel=wendland-c2)"
         ))
     })?;
+    ReconParams::try_from(&options)?;
+    options.max_memory_mib = Some(
+        options
+            .max_memory_mib
+            .map_or(cfg.max_memory_mib, |m| m.min(cfg.max_memory_mib)),
+    );
     let params = ReconParams::try_from(&options)?;
+    super::feasibility::check_request(&params, cfg)?;
     Ok((options, params, wait))
+}
+
+/// 422 `conflicting_parameters` for pairs that are each valid but cannot go together (the
+/// OpenAPI document cannot express that between query parameters, so this is 422, not 400):
+/// `support` with `neighbours`, and either with a method other than `csrbf`.
+fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
+    let has = |n: &str| pairs.iter().any(|p| p.0 == n);
+    let conflict = |m: &str| {
+        Err(ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "conflicting_parameters",
+            m.to_string(),
+        ))
+    };
+    if has("support") && has("neighbours") {
+        return conflict(
+            "support (a radius) and neighbours (a count) both choose the support: give one of them",
+        );
+    }
+    let global = pairs
+        .iter()
+        .any(|p| p.0 == "method" && matches!(p.1.as_str(), "variational" | "mls"));
+    if global && (has("support") || has("neighbours")) {
+        return conflict(
+            "support and neighbours apply to method csrbf only (variational and mls choose their own scale): drop them or use method=csrbf",
+        );
+    }
+    Ok(())
+}
+
+/// The API takes exactly the spellings its OpenAPI document lists (the command line is more
+/// lenient with case and aliases): choices from [`crate::params::choices`], `blocks` by
+/// [`crate::params::BLOCKS_PATTERN`].
+fn check_spelling(name: &str, value: &str) -> Result<(), ApiError> {
+    if name == "blocks" {
+        let number = (4..=9).contains(&value.len())
+            && value.bytes().all(|b| b.is_ascii_digit())
+            && !value.starts_with('0');
+        if !(number || value == "auto" || value == "none") {
+            return Err(ApiError::bad_parameter(format!(
+                "invalid parameter blocks = {value}: auto, none or a number of points per block from 1000 to 999999999"
+            )));
+        }
+    }
+    if let Some((_, values)) = crate::params::choices()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        && !values.contains(&value)
+    {
+        return Err(ApiError::bad_parameter(format!(
+            "invalid parameter {name} = {value}: one of {}",
+            values.join(", ")
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -155,9 +229,13 @@ mod tests {
         query_pairs(Some(q)).unwrap()
     }
 
+    fn parse(q: &str) -> Result<(ReconOptions, ReconParams, f64), ApiError> {
+        parse_params(&pairs(q), &ServerConfig::default())
+    }
+
     #[test]
     fn query_maps_to_the_shared_options() {
-        let (o, p, w) = parse_params(&pairs("resolution=32&kernel=wendland-c4&wait=2.5")).unwrap();
+        let (o, p, w) = parse("resolution=32&kernel=wendland-c4&wait=2.5").unwrap();
         assert_eq!(o.resolution, Some(32));
         assert_eq!(p.resolution, Some(32));
         assert_eq!(p.kernel.to_string(), "wendland-c4");
@@ -171,11 +249,53 @@ mod tests {
             "wait=nan",
             "support=0.1&support=0.2",
             "support=-1",
+            "max-memory-mib=4194305",
+            "ordering=BFS",
+            "index=kd-tree",
+            "blocks=999",
+            "blocks=01000",
         ] {
-            let e = parse_params(&pairs(bad)).unwrap_err();
+            let e = parse(bad).unwrap_err();
             assert_eq!(e.status, StatusCode::BAD_REQUEST, "{bad}");
             assert_eq!(e.body.code, "bad_parameter", "{bad}");
         }
+    }
+
+    #[test]
+    fn conflicting_pairs_are_422() {
+        for q in [
+            "support=0.1&neighbours=20",
+            "method=mls&neighbours=20",
+            "method=variational&support=0.2",
+        ] {
+            let e = parse(q).unwrap_err();
+            assert_eq!(
+                (e.status.as_u16(), e.body.code.as_str()),
+                (422, "conflicting_parameters"),
+                "{q}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_operators_limits_are_ceilings() {
+        let cfg = ServerConfig {
+            max_memory_mib: 512,
+            max_resolution: 256,
+            ..Default::default()
+        };
+        let (o, p, _) = parse_params(&pairs("max-memory-mib=4194304"), &cfg).unwrap();
+        assert_eq!((o.max_memory_mib, p.max_memory_mib), (Some(512), 512));
+        let (_, p, _) = parse_params(&pairs("max-memory-mib=100"), &cfg).unwrap();
+        assert_eq!(p.max_memory_mib, 100);
+        let (_, p, _) = parse_params(&pairs(""), &cfg).unwrap();
+        assert_eq!(p.max_memory_mib, 512);
+        let e = parse_params(&pairs("resolution=257"), &cfg).unwrap_err();
+        assert_eq!(
+            (e.status.as_u16(), e.body.code.as_str()),
+            (422, "system_too_large")
+        );
+        parse_params(&pairs("resolution=256"), &cfg).unwrap();
     }
 
     #[test]
@@ -194,5 +314,13 @@ mod tests {
         assert!(authorize(Some("s3"), &h).is_err());
         h.insert(header::AUTHORIZATION, "Bearer s3".parse().unwrap());
         assert!(authorize(Some("s3"), &h).is_ok());
+        for ok in ["bearer s3", "BEARER s3", "BeArEr  s3 "] {
+            h.insert(header::AUTHORIZATION, ok.parse().unwrap());
+            assert!(authorize(Some("s3"), &h).is_ok(), "{ok}");
+        }
+        for bad in ["Bearers3", "Basic s3", "s3", "Bearer"] {
+            h.insert(header::AUTHORIZATION, bad.parse().unwrap());
+            assert!(authorize(Some("s3"), &h).is_err(), "{bad}");
+        }
     }
 }

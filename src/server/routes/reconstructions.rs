@@ -1,188 +1,39 @@
 //! The job API under `/v1/reconstructions`: upload (raw body or multipart), list, status (with
 //! `?wait`), server-sent events, mesh download (glb/ply/obj), report, cancel/delete.
 //! Uploads are bounded before they are read (Content-Length) and while they are read (streamed
-//! count); parsing and the degenerate-input check run on the blocking pool before a job is queued.
+//! count, idle time, rate: [`super::upload`]); parsing and the feasibility check run on the
+//! blocking pool before a job is queued; cleaning and the degeneracy checks run in the job.
 
-use super::{
-    JobResponse, Pairs, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs,
+use super::upload::{
+    BodyKind, check_cloud, classify, guard_body, read_limited, read_multipart, too_large,
 };
-use crate::error::ErrorKind;
-use crate::io::{
-    MeshFormat, MeshMeta, PointFormat, ReadLimits, decode_glb, glb_crs, parse_point_cloud,
-    write_mesh_with,
-};
+use super::{JobResponse, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs};
+use crate::io::{MeshFormat, MeshMeta, decode_glb, glb_crs, write_mesh_with};
 use crate::server::AppState;
 use crate::server::error::{ApiError, ErrorBody, ErrorResponse};
 use crate::server::jobs::{InputInfo, Job, JobStatus, JobView};
 use crate::server::store::input_ext;
 use axum::Json;
 use axum::body::Body;
-use axum::extract::{FromRequest, Multipart, Path, RawQuery, Request, State};
+use axum::extract::{Path, RawQuery, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
-use futures_util::StreamExt;
 use std::convert::Infallible;
 use std::time::Duration;
 
-/// How long an upload waits for a free receive slot before it is answered 429.
-const UPLOAD_SLOT_WAIT: Duration = Duration::from_secs(30);
+/// A point file's bytes (documentation type of the binary request bodies).
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct PointFile(pub Vec<u8>);
 
-/// How the upload's bytes are to be read.
-enum BodyKind {
-    /// A raw point file of this format (`None`: sniff the content).
-    Raw(Option<PointFormat>),
-    /// `multipart/form-data` with a `file` part and parameter fields.
-    Multipart,
-}
-
-fn classify(headers: &HeaderMap) -> Result<BodyKind, ApiError> {
-    let Some(ct) = headers.get(header::CONTENT_TYPE) else {
-        return Ok(BodyKind::Raw(None));
-    };
-    let essence = ct
-        .to_str()
-        .unwrap_or("")
-        .split(';')
-        .next()
-        .unwrap_or("")
-        .trim()
-        .to_ascii_lowercase();
-    match format_for_media_type(&essence) {
-        Some(kind) => Ok(kind),
-        None => Err(unsupported(&format!(
-            "Content-Type {essence:?} is not a point format"
-        ))),
-    }
-}
-
-fn format_for_media_type(essence: &str) -> Option<BodyKind> {
-    Some(match essence {
-        "application/ply" | "application/x-ply" | "model/ply" | "model/x-ply" => {
-            BodyKind::Raw(Some(PointFormat::Ply))
-        }
-        "text/csv" => BodyKind::Raw(Some(PointFormat::Csv)),
-        "model/obj" | "text/x-obj" => BodyKind::Raw(Some(PointFormat::Obj)),
-        "application/vnd.las" | "application/vnd.laszip" => BodyKind::Raw(Some(PointFormat::Las)),
-        "text/plain" | "text/x-xyz" | "application/octet-stream" | "" => BodyKind::Raw(None),
-        "multipart/form-data" => BodyKind::Multipart,
-        _ => return None,
-    })
-}
-
-fn unsupported(what: &str) -> ApiError {
-    ApiError::new(
-        StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        "unsupported_media_type",
-        format!(
-            "{what}; send PLY (application/ply), XYZ/PTS text (text/plain), CSV (text/csv), OBJ (model/obj), LAS (application/vnd.las), LAZ (application/vnd.laszip), application/octet-stream (sniffed by magic bytes: PLY, LAS/LAZ, E57, text) or multipart/form-data with a `file` part"
-        ),
-    )
-}
-
-fn too_large(limit: u64) -> ApiError {
-    ApiError::too_large(format!(
-        "the upload is larger than this server's limit of {limit} bytes; subsample the cloud or ask for a larger --max-upload-mib"
-    ))
-}
-
-/// Reads the raw body, stopping with 413 as soon as it exceeds `limit` bytes.
-async fn read_limited(body: Body, limit: u64) -> Result<Vec<u8>, ApiError> {
-    let mut stream = body.into_data_stream();
-    let mut buf = Vec::new();
-    while let Some(chunk) = stream.next().await {
-        let chunk = chunk.map_err(|e| {
-            ApiError::new(
-                StatusCode::BAD_REQUEST,
-                "incomplete_body",
-                format!(
-                    "the request body could not be read completely ({e}); send the whole file again"
-                ),
-            )
-        })?;
-        if (buf.len() + chunk.len()) as u64 > limit {
-            return Err(too_large(limit));
-        }
-        buf.extend_from_slice(&chunk);
-    }
-    Ok(buf)
-}
-
-/// The file part (bytes, format hint) and the text fields of a multipart upload.
-async fn read_multipart(
-    req: Request,
-    st: &AppState,
-    pairs: &mut Pairs,
-) -> Result<(Vec<u8>, Option<PointFormat>), ApiError> {
-    let limit = st.jobs.config().max_upload_bytes;
-    let mp_err = |e: axum::extract::multipart::MultipartError| match e.status() {
-        StatusCode::PAYLOAD_TOO_LARGE => too_large(limit),
-        s => ApiError::new(
-            s,
-            "bad_multipart",
-            format!("malformed multipart body: {}", e.body_text()),
-        ),
-    };
-    let mut mp = Multipart::from_request(req, st)
-        .await
-        .map_err(|e| ApiError::new(e.status(), "bad_multipart", e.body_text()))?;
-    let mut file = None;
-    while let Some(field) = mp.next_field().await.map_err(mp_err)? {
-        let name = field.name().unwrap_or("").to_string();
-        if name == "file" || field.file_name().is_some() {
-            if file.is_some() {
-                return Err(ApiError::bad_parameter(
-                    "more than one file part; send one point file per job",
-                ));
-            }
-            let hint = field
-                .file_name()
-                .and_then(|n| PointFormat::from_path(std::path::Path::new(n)))
-                .or_else(|| match field.content_type().map(format_for_media_type) {
-                    Some(Some(BodyKind::Raw(f))) => f,
-                    _ => None,
-                });
-            let bytes = field.bytes().await.map_err(mp_err)?;
-            if bytes.len() as u64 > limit {
-                return Err(too_large(limit));
-            }
-            file = Some((bytes.to_vec(), hint));
-        } else {
-            let value = field.text().await.map_err(mp_err)?;
-            if !value.is_empty() {
-                pairs.push((name, value));
-            }
-        }
-    }
-    file.ok_or_else(|| ApiError::bad_parameter("multipart upload without a `file` part"))
-}
-
-/// Parses the points and refuses degenerate clouds (422) before anything is stored.
-async fn check_cloud(
-    st: &AppState,
-    bytes: Vec<u8>,
-    hint: Option<PointFormat>,
-    params: &crate::ReconParams,
-) -> Result<(Vec<u8>, PointFormat, usize), ApiError> {
-    let cfg = st.jobs.config();
-    let limits = ReadLimits {
-        max_points: cfg.max_points,
-        max_bytes: cfg.max_upload_bytes,
-        max_memory_mib: params.max_memory_mib,
-    };
-    let clean = params.clean;
-    tokio::task::spawn_blocking(move || {
-        let format = match hint {
-            Some(PointFormat::Xyz) | None => PointFormat::sniff(&bytes)
-                .ok_or_else(|| unsupported("binary content that is not PLY, LAS/LAZ or E57"))?,
-            Some(f) => f,
-        };
-        let cloud = parse_point_cloud(&bytes, format, &limits)?;
-        crate::clean::clean_cloud(&cloud, &clean)?;
-        Ok((bytes, format, cloud.points.len()))
-    })
-    .await
-    .map_err(|e| ApiError::internal(format!("upload check failed: {e}")))?
+/// A `multipart/form-data` upload: the point file in a part named `file`; parameters may come as
+/// further text fields with the query's names.
+#[derive(utoipa::ToSchema)]
+pub struct MultipartUpload {
+    /// The point file (PLY, XYZ/PTS, CSV, OBJ, LAS/LAZ or E57).
+    #[schema(value_type = String, format = Binary)]
+    pub file: Vec<u8>,
 }
 
 /// Submit a point cloud for reconstruction.
@@ -194,19 +45,23 @@ async fn check_cloud(
     params(crate::params::ReconOptions, WaitQuery),
     request_body(description = "point file: PLY (ascii/binary), XYZ/PTS text, CSV, OBJ vertices, LAS/LAZ 1.0–1.4, E57 (application/octet-stream, sniffed by its `ASTM-E57` signature; LAS/LAZ by `LASF`, PLY by `ply`); or multipart/form-data with `file`",
         content(
-            (Vec<u8> = "application/ply"), (String = "text/plain"), (String = "text/csv"),
-            (String = "model/obj"), (Vec<u8> = "application/vnd.las"), (Vec<u8> = "application/vnd.laszip"),
-            (Vec<u8> = "application/octet-stream"), (Vec<u8> = "multipart/form-data"))),
+            (PointFile = "application/ply"), (String = "text/plain"), (String = "text/csv"),
+            (String = "model/obj"), (PointFile = "application/vnd.las"), (PointFile = "application/vnd.laszip"),
+            (PointFile = "application/octet-stream"), (MultipartUpload = "multipart/form-data"))),
     responses(
-        (status = 202, description = "accepted and queued", body = JobResponse),
-        (status = 200, description = "finished within `wait`", body = JobResponse),
-        (status = 400, description = "bad parameter or incomplete body", body = ErrorResponse),
+        (status = 202, description = "accepted and queued (or still running after `wait`)", body = JobResponse),
+        (status = 200, description = "succeeded (or was cancelled) within `wait`", body = JobResponse),
+        (status = 400, description = "bad parameter, malformed multipart or incomplete body", body = ErrorResponse),
         (status = 401, description = "missing or wrong bearer token", body = ErrorResponse),
+        (status = 408, description = "the body stalled (no byte for 5 s) or arrived below the minimum rate", body = ErrorResponse),
+        (status = 409, description = "with `wait`: the job was cancelled while waiting (`{error, job}`)", body = ErrorResponse),
         (status = 413, description = "upload or point count over the limit", body = ErrorResponse),
         (status = 415, description = "unknown format", body = ErrorResponse),
-        (status = 422, description = "parses but cannot be reconstructed", body = ErrorResponse),
+        (status = 422, description = "parses but cannot be reconstructed, does not fit the server's limits (`system_too_large` with the estimate), parameters that conflict (`conflicting_parameters`) or do not suit the cloud (`unsuitable_parameter`); with `wait`: the job failed so (`{error, job}`)", body = ErrorResponse),
         (status = 429, description = "queue full, or too many uploads at once (see Retry-After)", body = ErrorResponse),
-        (status = 503, description = "shutting down", body = ErrorResponse)),
+        (status = 500, description = "internal error (generic message with an error id; with `wait`: `{error, job}`)", body = ErrorResponse),
+        (status = 503, description = "shutting down", body = ErrorResponse),
+        (status = 507, description = "the server's storage is full", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_job(
     State(st): State<AppState>,
@@ -227,13 +82,13 @@ pub async fn create_job(
     if declared.is_some_and(|n| n > cfg.max_upload_bytes) {
         return Err(too_large(cfg.max_upload_bytes));
     }
-    parse_params(&pairs)?;
+    parse_params(&pairs, cfg)?;
     let kind = classify(req.headers())?;
     if !st.jobs.has_room() {
         return Err(crate::server::jobs::SubmitError::QueueFull.into());
     }
     // At most a few uploads are buffered and parsed at once; others wait briefly, then get 429.
-    let permit = tokio::time::timeout(UPLOAD_SLOT_WAIT, st.uploads.clone().acquire_owned())
+    let permit = tokio::time::timeout(cfg.upload_slot_wait, st.uploads.clone().acquire_owned())
         .await
         .ok()
         .and_then(Result::ok)
@@ -245,14 +100,18 @@ pub async fn create_job(
             )
             .retry_after(2)
         })?;
+    // A stalled or trickling body is cut off (408), which frees its slot within seconds.
+    let (parts, body) = req.into_parts();
+    let (body, stall) = guard_body(body, cfg);
+    let req = Request::from_parts(parts, body);
     let (bytes, hint) = match kind {
         BodyKind::Raw(hint) => (
-            read_limited(req.into_body(), cfg.max_upload_bytes).await?,
+            read_limited(req.into_body(), cfg.max_upload_bytes, &stall).await?,
             hint,
         ),
-        BodyKind::Multipart => read_multipart(req, &st, &mut pairs).await?,
+        BodyKind::Multipart => read_multipart(req, &st, &mut pairs, &stall).await?,
     };
-    let (options, params, wait) = parse_params(&pairs)?;
+    let (options, params, wait) = parse_params(&pairs, cfg)?;
     let size = bytes.len() as u64;
     let (bytes, format, points) = check_cloud(&st, bytes, hint, &params).await?;
     let info = InputInfo {
@@ -290,11 +149,7 @@ async fn finished_answer(st: &AppState, view: JobView) -> Result<Response, ApiEr
             code: "internal".into(),
             message: "failed without a message".into(),
         });
-        // Failures the job record names by a stage's code (timeouts, interruptions, storage) are 500s.
-        let status = ErrorKind::from_code(&err.code).map_or(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            crate::server::error::status_of,
-        );
+        let status = crate::server::error::status_of_code(&err.code);
         let body = serde_json::json!({ "error": err, "job": job_response(view, None) });
         return Ok((status, Json(body)).into_response());
     }
@@ -319,16 +174,26 @@ async fn load_report(st: &AppState, view: &JobView) -> Option<serde_json::Value>
 }
 
 /// List every stored job (oldest first), including those recovered after a restart.
+///
+/// When the server has a token, listing requires it (the list holds every job id, and an id is
+/// what grants reading a job and its mesh).
 #[utoipa::path(get, path = "/v1/reconstructions", tag = "reconstructions",
-    responses((status = 200, description = "all jobs", body = Vec<JobView>)))]
-pub async fn list_jobs(State(st): State<AppState>) -> Json<Vec<JobView>> {
-    Json(st.jobs.list())
+    responses((status = 200, description = "all jobs", body = Vec<JobView>),
+        (status = 401, description = "the server has a token and the request lacks it", body = ErrorResponse)),
+    security((), ("bearer" = [])))]
+pub async fn list_jobs(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+) -> Result<Json<Vec<JobView>>, ApiError> {
+    authorize(st.jobs.config().token.as_deref(), &headers)?;
+    Ok(Json(st.jobs.list()))
 }
 
 /// Job status, progress (stage + fraction), error, and the report once it succeeded.
 #[utoipa::path(get, path = "/v1/reconstructions/{id}", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)"), WaitQuery),
-    responses((status = 200, body = JobResponse), (status = 400, body = ErrorResponse),
+    responses((status = 200, description = "the job", body = JobResponse),
+        (status = 400, description = "bad `wait`", body = ErrorResponse),
         (status = 404, description = "unknown id", body = ErrorResponse)))]
 pub async fn get_job(
     State(st): State<AppState>,
@@ -355,8 +220,8 @@ pub async fn get_job(
 /// event (the final state) and the stream ends.
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/events", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
-    responses((status = 200, description = "text/event-stream of JobView JSON", content_type = "text/event-stream", body = String),
-        (status = 404, body = ErrorResponse)))]
+    responses((status = 200, description = "server-sent events `progress` and `done`, each with the job (JobView) as JSON data", content_type = "text/event-stream", body = String),
+        (status = 404, description = "unknown id", body = ErrorResponse)))]
 pub async fn job_events(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -409,15 +274,15 @@ async fn mesh_file(st: &AppState, id: &str, format: MeshFormat) -> Result<Respon
         })
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(e.to_string()))?;
+        .map_err(ApiError::from)?;
     }
     let file = tokio::fs::File::open(&path)
         .await
-        .map_err(|e| ApiError::internal(format!("stored mesh unreadable: {e}")))?;
+        .map_err(|e| ApiError::from_io("stored mesh unreadable", &e))?;
     let len = file
         .metadata()
         .await
-        .map_err(|e| ApiError::internal(format!("stored mesh unreadable: {e}")))?
+        .map_err(|e| ApiError::from_io("stored mesh unreadable", &e))?
         .len();
     let disposition = format!(
         "attachment; filename=\"rbfsurf-{}.{}\"",
@@ -451,8 +316,10 @@ fn not_ready(view: &JobView) -> ApiError {
 /// The mesh as binary glTF 2.0.
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/mesh.glb", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
-    responses((status = 200, content_type = "model/gltf-binary", body = Vec<u8>),
-        (status = 404, body = ErrorResponse), (status = 409, description = "not finished", body = ErrorResponse)))]
+    responses((status = 200, description = "the mesh", content_type = "model/gltf-binary", body = Vec<u8>),
+        (status = 404, description = "unknown id", body = ErrorResponse),
+        (status = 409, description = "the job has no result (not finished, failed or cancelled)", body = ErrorResponse),
+        (status = 500, description = "stored mesh unreadable (error id)", body = ErrorResponse)))]
 pub async fn mesh_glb(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -463,8 +330,11 @@ pub async fn mesh_glb(
 /// The mesh as binary PLY (converted on first request).
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/mesh.ply", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
-    responses((status = 200, content_type = "application/ply", body = Vec<u8>),
-        (status = 404, body = ErrorResponse), (status = 409, body = ErrorResponse)))]
+    responses((status = 200, description = "the mesh", content_type = "application/ply", body = Vec<u8>),
+        (status = 404, description = "unknown id", body = ErrorResponse),
+        (status = 409, description = "the job has no result (not finished, failed or cancelled)", body = ErrorResponse),
+        (status = 500, description = "conversion failed (error id)", body = ErrorResponse),
+        (status = 507, description = "no storage for the converted file", body = ErrorResponse)))]
 pub async fn mesh_ply(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -475,8 +345,11 @@ pub async fn mesh_ply(
 /// The mesh as Wavefront OBJ (converted on first request).
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/mesh.obj", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
-    responses((status = 200, content_type = "model/obj", body = String),
-        (status = 404, body = ErrorResponse), (status = 409, body = ErrorResponse)))]
+    responses((status = 200, description = "the mesh", content_type = "model/obj", body = String),
+        (status = 404, description = "unknown id", body = ErrorResponse),
+        (status = 409, description = "the job has no result (not finished, failed or cancelled)", body = ErrorResponse),
+        (status = 500, description = "conversion failed (error id)", body = ErrorResponse),
+        (status = 507, description = "no storage for the converted file", body = ErrorResponse)))]
 pub async fn mesh_obj(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -531,7 +404,9 @@ pub async fn job_field(
 /// The reconstruction report (JSON contract of the README).
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/report", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
-    responses((status = 200, body = Object), (status = 404, body = ErrorResponse), (status = 409, body = ErrorResponse)))]
+    responses((status = 200, description = "the report", body = Object),
+        (status = 404, description = "unknown id", body = ErrorResponse),
+        (status = 409, description = "the job has no report (not finished, failed or cancelled)", body = ErrorResponse)))]
 pub async fn job_report(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -548,7 +423,10 @@ pub async fn job_report(
 #[utoipa::path(delete, path = "/v1/reconstructions/{id}", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
     responses((status = 202, description = "cancellation requested", body = JobResponse),
-        (status = 204, description = "deleted"), (status = 401, body = ErrorResponse), (status = 404, body = ErrorResponse)),
+        (status = 204, description = "deleted"),
+        (status = 401, description = "missing or wrong bearer token", body = ErrorResponse),
+        (status = 404, description = "unknown id", body = ErrorResponse),
+        (status = 500, description = "the files could not be deleted (error id)", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn delete_job(
     State(st): State<AppState>,
@@ -566,7 +444,7 @@ pub async fn delete_job(
     tokio::task::spawn_blocking(move || jobs.delete(jid))
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(format!("cannot delete the job's files: {e}")))?;
+        .map_err(|e| ApiError::from_io("cannot delete the job's files", &e))?;
     tracing::info!(id = %jid, "job deleted");
     Ok(StatusCode::NO_CONTENT.into_response())
 }
