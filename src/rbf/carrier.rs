@@ -568,7 +568,7 @@ impl LocalCarrier {
         self.blend(x, &ids, rho, None).0
     }
 
-    /// Blend the local value with the winding far field `R (1 − 2w)` (±R far outside / inside):
+    /// Blend the local value with the winding far field `d₁ (1 − 2w)` (about ±d₁ outside / inside):
     /// `g = (1 − τ) g_local + τ g_far` with `τ = s((d₁ − R/2)/R) · c`, `s` the C¹ smoothstep, `d₁`
     /// the distance to the nearest point and `c` the far field's confidence: 1 where `w` is
     /// decisively inside or outside (`|1 − 2w| ≥ 0.6`), 0 where it is undecided
@@ -589,13 +589,16 @@ impl LocalCarrier {
         let a = 1.0 - 2.0 * wv;
         let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
         let dc_dw = dc / 0.4 * -2.0 * a.signum();
-        let gf = r * a;
+        // ±d₁ where decided: distance-like (slope about 1) so the polygonizer's skip test still
+        // rules out far cells.
+        let gf = d1 * a;
         let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
         let tau = s1 * c;
         let g = (1.0 - tau) * gl + tau * gf;
         let grad = [0, 1, 2].map(|k| {
             let dtau = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
-            (1.0 - tau) * dl[k] - tau * 2.0 * r * wg[k] + (gf - gl) * dtau
+            let dgf = -2.0 * d1 * wg[k] + a * dd1[k];
+            (1.0 - tau) * dl[k] + tau * dgf + (gf - gl) * dtau
         });
         (g, grad)
     }
