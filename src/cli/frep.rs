@@ -1,5 +1,6 @@
 //! Volume modelling commands: `field info`, `csg`, `morph`, `voxelize` (see docs/volume-modelling.md).
 
+use super::check_parent;
 use super::progress::BarProgress;
 use crate::cli::outln;
 use crate::frep::expr::{Loader, build};
@@ -91,20 +92,6 @@ pub struct VoxelizeArgs {
 
 fn solid_of(src: &str, loader: &mut Loader) -> Result<Solid> {
     Ok(build(&parse(src)?, loader)?)
-}
-
-fn check_parent(out: &Path) -> Result<()> {
-    let dir = out.parent().filter(|d| !d.as_os_str().is_empty());
-    if let Some(d) = dir
-        && !d.is_dir()
-    {
-        bail!(
-            "{}: the output directory {} does not exist",
-            out.display(),
-            d.display()
-        );
-    }
-    Ok(())
 }
 
 /// `field info`.

@@ -141,6 +141,21 @@ fn one_line(e: &anyhow::Error) -> String {
     msg.replace('\n', " ")
 }
 
+/// Refuse an output path whose directory does not exist (before any work is done).
+fn check_parent(out: &std::path::Path) -> anyhow::Result<()> {
+    let dir = out.parent().filter(|d| !d.as_os_str().is_empty());
+    if let Some(d) = dir
+        && !d.is_dir()
+    {
+        anyhow::bail!(
+            "{}: the output directory {} does not exist",
+            out.display(),
+            d.display()
+        );
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

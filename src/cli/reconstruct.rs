@@ -5,7 +5,7 @@ use crate::cli::outln;
 use crate::io::{MeshFormat, ReadLimits};
 use crate::params::{ReconOptions, ReconParams};
 use crate::pipeline::{self, PointSource, RunOutput};
-use anyhow::{Result, bail};
+use anyhow::Result;
 use std::path::PathBuf;
 
 /// Arguments of `reconstruct`. Every parameter is optional: `None` takes the library default.
@@ -39,16 +39,7 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
     let format = MeshFormat::from_path(&a.output)?;
     let outputs = [Some(&a.output), a.report.as_ref(), a.save_field.as_ref()];
     for out in outputs.into_iter().flatten() {
-        let dir = out.parent().filter(|d| !d.as_os_str().is_empty());
-        if let Some(d) = dir
-            && !d.is_dir()
-        {
-            bail!(
-                "{}: the output directory {} does not exist",
-                out.display(),
-                d.display()
-            );
-        }
+        super::check_parent(out)?;
     }
     let mut limits = ReadLimits {
         max_memory_mib: params.max_memory_mib,

@@ -185,9 +185,7 @@ pub(crate) fn patch_winding(cloud: &PatchedCloud) -> Vec<f64> {
 
 /// The winding number at `x` of a dipole of moment `mu` at `s`, softened by `eps2`.
 fn winding(x: Point3, s: Point3, mu: Point3, eps2: f64) -> f64 {
-    let r = [s[0] - x[0], s[1] - x[1], s[2] - x[2]];
-    let d2 = dot(r, r) + eps2;
-    dot(r, mu) / (4.0 * std::f64::consts::PI * d2 * d2.sqrt())
+    crate::rbf::winding::dipole([s[0] - x[0], s[1] - x[1], s[2] - x[2]], mu, eps2)
 }
 
 /// The field `∇w` at `x` of a dipole of moment `mu` at `s`, softened by `eps2` (squared length).

@@ -316,7 +316,7 @@ impl DipoleTree {
 
 /// Winding number at the origin of a dipole of moment `mu` at offset `r` (source − x), softened by
 /// `eps2` (squared length).
-fn dipole(r: Point3, mu: Point3, eps2: f64) -> f64 {
+pub(crate) fn dipole(r: Point3, mu: Point3, eps2: f64) -> f64 {
     let d2 = dot(r, r) + eps2;
     dot(r, mu) / (4.0 * std::f64::consts::PI * d2 * d2.sqrt())
 }
