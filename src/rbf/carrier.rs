@@ -221,13 +221,7 @@ fn ellipsoid_local(
 }
 
 /// Distance from the data, in support radii, where the far field starts to take over.
-const FAR_FROM: f64 = 0.25;
-
-/// Width of the hand-over to the far field, in support radii: fully far at `FAR_FROM + FAR_WIDTH`.
-/// Measured (defaults, 10k statue samples without normals): hand-over over [R/4, 3R/4] instead of
-/// [R/2, 3R/2] lowers the Chamfer distance to the truth by 10–45 % (camel 6.9e-4 → 3.7e-4) with the
-/// same topology; [0.15 R, 0.45 R] adds handles on sparse samples.
-const FAR_WIDTH: f64 = 0.5;
+const FAR_FROM: f64 = 0.5;
 
 /// The C¹ smoothstep `3u² − 2u³` of `u` clamped to [0, 1], and its derivative.
 fn smoothstep(u: f64) -> (f64, f64) {
@@ -575,7 +569,7 @@ impl LocalCarrier {
     }
 
     /// Blend the local value with the winding far field `d₁ (1 − 2w)` (about ±d₁ outside / inside):
-    /// `g = (1 − τ) g_local + τ g_far` with `τ = s((d₁ − R/4)/(R/2)) · c`, `s` the C¹ smoothstep, `d₁`
+    /// `g = (1 − τ) g_local + τ g_far` with `τ = s((d₁ − R/2)/R) · c`, `s` the C¹ smoothstep, `d₁`
     /// the distance to the nearest point and `c` the far field's confidence: 1 where `w` is
     /// decisively inside or outside (`|1 − 2w| ≥ 0.6`), 0 where it is undecided
     /// (`|1 − 2w| ≤ 0.2`: beside an open sheet, across a wide hole), where the tangent planes keep
@@ -590,7 +584,7 @@ impl LocalCarrier {
         nearest: Point3,
     ) -> (f64, Point3) {
         let r = self.radius;
-        let (s1, ds1) = smoothstep((d1 - FAR_FROM * r) / (FAR_WIDTH * r));
+        let (s1, ds1) = smoothstep((d1 - FAR_FROM * r) / r);
         let (wv, wg) = w.value_gradient(x);
         let a = 1.0 - 2.0 * wv;
         let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
@@ -602,7 +596,7 @@ impl LocalCarrier {
         let tau = s1 * c;
         let g = (1.0 - tau) * gl + tau * gf;
         let grad = [0, 1, 2].map(|k| {
-            let dtau = ds1 / (FAR_WIDTH * r) * dd1[k] * c + s1 * dc_dw * wg[k];
+            let dtau = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
             let dgf = -2.0 * d1 * wg[k] + a * dd1[k];
             (1.0 - tau) * dl[k] + tau * dgf + (gf - gl) * dtau
         });
