@@ -157,9 +157,10 @@ const PREPARE_BYTES: f64 = 100.0;
 /// pages for reuse): measured at 10⁷ points, 565 MiB between block fits.
 const RETAINED_BYTES: f64 = 48.0;
 /// Bytes per core point of a block task: its point set with halo and overlap, the carrier's
-/// copies and trees, the system of its members (measured at 10⁷ points: ~500 MiB above the
-/// retained level per 250,000-point block, ~2000 B; 2400 leaves a margin).
-const TASK_BYTES: f64 = 2400.0;
+/// copies and trees, the system of its members. Measured at 10⁷ points: two blocks of up to
+/// 209,000 members at once rose ~1,040 MiB above the retained level (~2,500 B per member), and
+/// a block has ~1.25 members per core point.
+const TASK_BYTES: f64 = 3200.0;
 /// Most core points per block (the in-memory block size).
 const MAX_BLOCK_POINTS: usize = 250_000;
 /// Fewest core points per block.
