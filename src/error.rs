@@ -45,6 +45,9 @@ pub enum ReconError {
         /// The budget, MiB.
         budget_mib: u64,
     },
+    /// The out-of-core task graph refused the input or its store failed.
+    #[error(transparent)]
+    Tiled(#[from] crate::pipeline::tiled::TiledError),
     /// The caller cancelled.
     #[error("cancelled")]
     Cancelled,
@@ -157,6 +160,7 @@ impl ReconError {
                     | crate::polygonize::PolygonizeError::TooManyVertices { .. },
                 )
                 | ReconError::TooManyPoints { .. } => ErrorKind::OverBudget,
+                ReconError::Tiled(e) => e.kind(),
                 _ => ErrorKind::Internal,
             }
         }

@@ -25,6 +25,26 @@ pub struct Report {
     pub polygonize: PolygonizeReport,
     /// Vertex colours and georeference carried from the input.
     pub attributes: AttributesReport,
+    /// One entry per partition-of-unity block of an out-of-core (task graph) run: who fitted it,
+    /// how many points, how long and at what memory. Absent for in-memory runs.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<BlockReport>,
+}
+
+/// One block of a task-graph run (report `blocks[]`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlockReport {
+    /// Block number (the order of the plan).
+    pub id: usize,
+    /// Id of the worker that fitted it (`local-<pid>` for the local executor).
+    pub worker: String,
+    /// Points of its system (inside its outer box).
+    pub points: usize,
+    /// Wall-clock seconds of the fit, including loading its points.
+    pub seconds: f64,
+    /// Peak resident memory of the fitting process when the block finished, MiB (Linux VmHWM:
+    /// with several blocks in one process, the process's high-water mark so far).
+    pub peak_rss_mib: f64,
 }
 
 /// What the input carried besides positions and normals, and what the mesh got from it.

@@ -76,7 +76,7 @@ pub(crate) fn fit_blocks(
 
 /// Sum a block's systems into the total: sizes add up, bandwidth is the largest, levels merge by
 /// position (RMS of the right-hand sides weighted by size, iterations the largest).
-fn merge_report(total: &mut MatrixReport, block: MatrixReport) {
+pub(super) fn merge_report(total: &mut MatrixReport, block: MatrixReport) {
     total.n += block.n;
     total.nnz += block.nnz;
     total.bandwidth = total.bandwidth.max(block.bandwidth);

@@ -17,6 +17,7 @@ mod csrbf;
 mod global;
 pub mod run;
 mod surface;
+pub mod tiled;
 
 pub use csrbf::fit_field;
 pub use run::{PointSource, RunError, RunOutput, RunSummary, run};
@@ -112,6 +113,41 @@ pub fn estimated_peak_mib(points: u64) -> f64 {
     64.0 + (points as f64 * 460.0 + alive as f64 * 1230.0) / (1u64 << 20) as f64
 }
 
+/// How a reconstruction runs within its memory budget ([`plan_execution`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Execution {
+    /// The whole cloud in memory ([`reconstruct`]).
+    InMemory,
+    /// The task graph with intermediate results on disk ([`tiled::reconstruct_tiled`]), at this
+    /// estimated cost.
+    OutOfCore(tiled::OutOfCoreEstimate),
+}
+
+/// Choose, before reading, how `points` points are reconstructed with `params`: in memory when
+/// [`estimated_peak_mib`] fits the budget, else out of core when the parameters allow it
+/// ([`tiled::supports`], blocks not `none`) and its [`tiled::estimate`] fits; otherwise the
+/// refusal names the cost.
+pub fn plan_execution(points: u64, params: &ReconParams) -> Result<Execution, ReconError> {
+    let budget = params.max_memory_mib;
+    let refusal = match check_scale(points, budget) {
+        Ok(()) => return Ok(Execution::InMemory),
+        Err(e) => e,
+    };
+    if !tiled::supports(params) || params.blocks == crate::rbf::Blocks::None {
+        return Err(refusal);
+    }
+    let est = tiled::estimate(points, budget, rayon::current_num_threads());
+    if est.peak_mib > budget as f64 {
+        return Err(tiled::TiledError::OverBudget {
+            points,
+            mib: est.peak_mib,
+            budget_mib: budget,
+        }
+        .into());
+    }
+    Ok(Execution::OutOfCore(est))
+}
+
 /// Refuse, before any work, a cloud whose reconstruction would not fit the budget.
 pub fn check_scale(points: u64, budget_mib: u64) -> Result<(), ReconError> {
     let mib = estimated_peak_mib(points);
@@ -172,6 +208,7 @@ fn reconstruct_inner(
         },
         polygonize,
         attributes,
+        blocks: Vec::new(),
     };
     let field = fit.rbf.map(|rbf| crate::frep::FieldModel {
         rbf,

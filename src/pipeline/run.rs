@@ -133,7 +133,7 @@ pub fn run(
             // Refuse a scan whose points alone cannot fit the budget before reading it.
             let hint = peek_point_count(path).map_err(RunError::Read)?;
             hint.check_budget(limits, path).map_err(RunError::Read)?;
-            super::check_scale(hint.points, params.max_memory_mib).map_err(recon_err)?;
+            super::plan_execution(hint.points, params).map_err(recon_err)?;
             read_point_cloud(path, limits).map_err(RunError::Read)?
         }
         PointSource::Bytes { data, format } => {
@@ -148,9 +148,25 @@ pub fn run(
             expected: "csrbf when saving the field (--save-field): the global methods have no saved form",
         })));
     }
-    let (mut rec, field) =
-        super::reconstruct_keeping_field(&cloud, params, progress).map_err(recon_err)?;
-    drop(cloud);
+    let execution = super::plan_execution(cloud.points.len() as u64, params).map_err(recon_err)?;
+    let (mut rec, field) = match execution {
+        super::Execution::InMemory => {
+            let rec = super::reconstruct_keeping_field(&cloud, params, progress);
+            drop(cloud);
+            rec.map_err(recon_err)?
+        }
+        super::Execution::OutOfCore(_) => {
+            if output.field.is_some() {
+                return Err(recon_err(
+                    super::tiled::TiledError::Unsupported("--save-field").into(),
+                ));
+            }
+            let options = super::tiled::TiledOptions::default();
+            let rec = super::tiled::reconstruct_tiled(cloud, params, &options, progress)
+                .map_err(recon_err)?;
+            (rec, None)
+        }
+    };
     super::check_cancel(progress).map_err(recon_err)?;
     progress.stage(Stage::Write);
     let t = Instant::now();

@@ -273,6 +273,24 @@ pub fn fit_carrier(
 /// Neighbours per point for its area (`π d_k² / k`).
 const AREA_NEIGHBOURS: usize = 8;
 
+/// The winding grid of `points` with unit `normals` (zero = unusable), as a [`LocalCarrier`]
+/// builds it over its own points (see [`winding_grid`]). An out-of-core reconstruction builds it
+/// once from a bounded subsample of the whole cloud (the areas then come from the subsample's
+/// own spacing, so the dipoles still cover the surface) and shares it with every block's carrier
+/// through [`LocalCarrier::with_winding`]. `None` when no normal is usable.
+pub fn build_winding_grid(
+    points: &[Point3],
+    normals: &[Point3],
+    radius: f64,
+) -> Option<WindingGrid> {
+    let valid_ids: Vec<u32> = (0..points.len() as u32)
+        .filter(|&i| normals[i as usize] != [0.0; 3])
+        .collect();
+    let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
+    let valid_tree = KdTree::build(&valid_points).ok()?;
+    winding_grid(points, normals, &valid_tree, &valid_ids, radius).map(|b| *b)
+}
+
 /// The winding grid of the points with usable normals: areas from their [`AREA_NEIGHBOURS`]
 /// nearest neighbours, cells of about `radius` over the points' box grown by `2 radius` and two
 /// cells (beyond it the far field is clamped to the boundary's, about `w = 0`).
@@ -397,8 +415,9 @@ pub struct LocalCarrier {
     index: Arc<dyn SpatialIndex + Send>,
     valid_tree: KdTree,
     valid_ids: Vec<u32>,
-    /// The winding number of the oriented points (the far field's sign).
-    winding: Option<Box<WindingGrid>>,
+    /// The winding number of the oriented points (the far field's sign); shared when given by
+    /// [`LocalCarrier::with_winding`].
+    winding: Option<Arc<WindingGrid>>,
     /// Whether the far field is used (see [`LocalCarrier::far_field_switch`]).
     far_field: Arc<AtomicBool>,
 }
@@ -445,7 +464,41 @@ impl LocalCarrier {
         }
         let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
         let valid_tree = KdTree::build(&valid_points).ok()?;
-        let winding = winding_grid(&points, &normals, &valid_tree, &valid_ids, radius);
+        let winding =
+            winding_grid(&points, &normals, &valid_tree, &valid_ids, radius).map(Arc::from);
+        Some(LocalCarrier {
+            points,
+            normals,
+            radius,
+            index,
+            valid_tree,
+            valid_ids,
+            winding,
+            far_field: Arc::new(AtomicBool::new(true)),
+        })
+    }
+
+    /// A carrier over `points` (a part of a larger cloud, e.g. one block with its halo) whose far
+    /// field is `winding`, built once for the whole cloud ([`build_winding_grid`]), instead of
+    /// one of its own points. `normals` are unit vectors as [`Self::normals`] gives them (zero =
+    /// unusable), already oriented: [`Self::flip_normals`] leaves a shared grid unchanged, so
+    /// orient the normals and negate the grid before sharing them. `None` when no normal is
+    /// usable or the lengths differ.
+    pub fn with_winding(
+        points: Vec<Point3>,
+        normals: Vec<Point3>,
+        radius: f64,
+        index: Arc<dyn SpatialIndex + Send>,
+        winding: Option<Arc<WindingGrid>>,
+    ) -> Option<Self> {
+        let valid_ids: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| normals.get(i as usize).is_some_and(|n| *n != [0.0; 3]))
+            .collect();
+        if valid_ids.is_empty() || normals.len() != points.len() {
+            return None;
+        }
+        let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
+        let valid_tree = KdTree::build(&valid_points).ok()?;
         Some(LocalCarrier {
             points,
             normals,
@@ -468,12 +521,14 @@ impl LocalCarrier {
         &self.normals
     }
 
-    /// Flip every normal (used when the input's normals turn out to point inwards).
+    /// Flip every normal (used when the input's normals turn out to point inwards), and the far
+    /// field with them when this carrier owns it (a grid shared through [`Self::with_winding`] is
+    /// the caller's to orient).
     pub fn flip_normals(&mut self) {
         for n in &mut self.normals {
             *n = [-n[0], -n[1], -n[2]];
         }
-        if let Some(w) = &mut self.winding {
+        if let Some(w) = self.winding.as_mut().and_then(Arc::get_mut) {
             w.negate();
         }
     }

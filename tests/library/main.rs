@@ -7,6 +7,7 @@ mod common;
 mod frep;
 mod large;
 mod open_scans;
+mod out_of_core;
 mod parser_soak;
 mod pipeline;
 mod run;
