@@ -16,6 +16,7 @@ pub mod optimize;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 pub mod topology;
+pub mod simplify;
 pub mod trim;
 
 pub use color::{ColorMode, vertex_colors};
