@@ -13,10 +13,10 @@ pub mod compare;
 mod distance;
 pub mod floaters;
 pub mod optimize;
+pub mod simplify;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 pub mod topology;
-pub mod simplify;
 pub mod trim;
 
 pub use color::{ColorMode, vertex_colors};

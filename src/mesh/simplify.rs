@@ -5,12 +5,15 @@
 //! edge's end points), so a vertex that lay on the surface still does, with its normal.
 //!
 //! The result is kept only when its topology is the input's (components, watertight, manifold,
-//! oriented, boundary loops, Euler characteristic, genus); otherwise the tolerance is halved, up to
-//! [`ATTEMPTS`] times, and the input is kept as it is when no attempt preserves it. Open borders are
+//! oriented, boundary loops, Euler characteristic, genus). Edge collapses do not check the link
+//! condition, so a collapse can fold two sheets onto a non-manifold edge; then the vertices around
+//! each such defect are locked and the simplification redone (up to [`LOCK_ROUNDS`] times), and
+//! when that does not help the tolerance is halved, up to [`ATTEMPTS`] times, and the input is kept as it is when no attempt preserves it. Open borders are
 //! locked (they stay exactly where trimming put them). `O(F log F)` for `F` triangles.
 
 use crate::geometry::TriMesh;
 use crate::mesh::topology::{MeshTopology, analyze};
+use std::collections::{HashMap, HashSet};
 
 /// Tolerances tried: the given one, then halved each time.
 pub const ATTEMPTS: usize = 3;
@@ -87,35 +90,126 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
         .collect();
     let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
     let options = meshopt::SimplifyOptions::ErrorAbsolute | meshopt::SimplifyOptions::LockBorder;
+    let original_border = border_edges(&mesh.triangles);
+    let mut locks = vec![false; mesh.vertices.len()];
     let mut tol = tolerance;
     for _ in 0..ATTEMPTS {
-        let mut error = 0.0f32;
-        let kept = meshopt::simplify_decoder(
-            &indices,
-            &positions,
-            0,
-            tol as f32,
-            options,
-            Some(&mut error),
-        );
-        let candidate = TriMesh {
-            triangles: kept.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-            ..TriMesh::default()
-        };
-        let mut probe = candidate;
-        probe.vertices = std::mem::take(&mut mesh.vertices);
-        let same = signature(&analyze(&probe)) == signature(&before);
-        mesh.vertices = std::mem::take(&mut probe.vertices);
-        if same {
-            stats.triangles_after = probe.triangles.len();
-            stats.tolerance_used = tol;
-            stats.error = error as f64;
-            mesh.triangles = probe.triangles;
-            return stats;
+        for _ in 0..LOCK_ROUNDS {
+            let mut error = 0.0f32;
+            let kept = meshopt::simplify_with_locks_decoder(
+                &indices,
+                &positions,
+                &locks,
+                0,
+                tol as f32,
+                options,
+                Some(&mut error),
+            );
+            let mut probe = TriMesh {
+                triangles: kept.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+                vertices: std::mem::take(&mut mesh.vertices),
+                ..TriMesh::default()
+            };
+            let same = signature(&analyze(&probe)) == signature(&before);
+            mesh.vertices = std::mem::take(&mut probe.vertices);
+            if same {
+                stats.triangles_after = probe.triangles.len();
+                stats.tolerance_used = tol;
+                stats.error = error as f64;
+                mesh.triangles = probe.triangles;
+                return stats;
+            }
+            if !lock_around_defects(mesh, &probe.triangles, &original_border, &mut locks) {
+                break;
+            }
         }
         tol *= 0.5;
     }
     stats
+}
+
+/// Rounds of locking the vertices around an attempt's defects before the tolerance is halved.
+const LOCK_ROUNDS: usize = 4;
+
+/// Undirected edges used by exactly one triangle.
+fn border_edges(triangles: &[[u32; 3]]) -> HashSet<(u32, u32)> {
+    edge_uses(triangles)
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|(e, _)| e)
+        .collect()
+}
+
+/// Uses of every undirected edge.
+fn edge_uses(triangles: &[[u32; 3]]) -> HashMap<(u32, u32), u32> {
+    let mut uses = HashMap::with_capacity(triangles.len() * 2);
+    for t in triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    uses
+}
+
+/// Locks every vertex of `mesh` near a defect of the simplified `triangles` (an edge used three
+/// times or more, a border edge the input did not have, a triangle repeating a vertex): within
+/// twice the longest simplified edge at the defect. Returns false when no defect is local (the
+/// topology changed otherwise, e.g. a handle closed) or nothing new was locked.
+fn lock_around_defects(
+    mesh: &TriMesh,
+    triangles: &[[u32; 3]],
+    original_border: &HashSet<(u32, u32)>,
+    locks: &mut [bool],
+) -> bool {
+    let mut reach: HashMap<u32, f64> = HashMap::new();
+    let length = |(a, b): (u32, u32)| {
+        crate::geometry::dist2(mesh.vertices[a as usize], mesh.vertices[b as usize]).sqrt()
+    };
+    for (e, n) in edge_uses(triangles) {
+        if n >= 3 || (n == 1 && !original_border.contains(&e)) {
+            for v in [e.0, e.1] {
+                let r = reach.entry(v).or_insert(0.0);
+                *r = r.max(length(e));
+            }
+        }
+    }
+    for t in triangles {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            for &v in t {
+                reach.entry(v).or_insert(0.0);
+            }
+        }
+    }
+    if reach.is_empty() {
+        return false;
+    }
+    // The longest simplified edge at each defect vertex sets how far its collapses reached.
+    for t in triangles {
+        for k in 0..3 {
+            let e = (t[k], t[(k + 1) % 3]);
+            for v in [e.0, e.1] {
+                if let Some(r) = reach.get_mut(&v) {
+                    *r = r.max(length(e));
+                }
+            }
+        }
+    }
+    let mut centres: Vec<(u32, f64)> = reach.into_iter().collect();
+    centres.sort_unstable_by_key(|c| c.0);
+    let Ok(tree) = crate::spatial::KdTree::build(&mesh.vertices) else {
+        return false;
+    };
+    let mut hits = Vec::new();
+    let mut changed = false;
+    for (v, r) in centres {
+        crate::spatial::SpatialIndex::within(&tree, &mesh.vertices[v as usize], 2.0 * r, &mut hits);
+        for &h in &hits {
+            changed |= !locks[h as usize];
+            locks[h as usize] = true;
+        }
+    }
+    changed
 }
 
 #[cfg(test)]
@@ -197,7 +291,8 @@ mod tests {
     fn open_borders_stay_where_they_are() {
         let mut mesh = sphere(1.0, 30);
         // Cut the cap above z = 0.5 away: one boundary loop.
-        mesh.triangles.retain(|t| t.iter().all(|&v| mesh.vertices[v as usize][2] < 0.5));
+        mesh.triangles
+            .retain(|t| t.iter().all(|&v| mesh.vertices[v as usize][2] < 0.5));
         let border = |m: &TriMesh| {
             let mut count = std::collections::HashMap::new();
             for t in &m.triangles {
@@ -206,7 +301,11 @@ mod tests {
                     *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
                 }
             }
-            let mut e: Vec<(u32, u32)> = count.into_iter().filter(|(_, n)| *n == 1).map(|(e, _)| e).collect();
+            let mut e: Vec<(u32, u32)> = count
+                .into_iter()
+                .filter(|(_, n)| *n == 1)
+                .map(|(e, _)| e)
+                .collect();
             e.sort_unstable();
             e
         };

@@ -29,8 +29,8 @@
 use super::FittedField;
 use crate::error::ReconError;
 use crate::geometry::{Aabb, TriMesh};
-use crate::mesh::{area, floaters, trim};
 use crate::mesh::simplify;
+use crate::mesh::{area, floaters, trim};
 use crate::params::{Boundary, ChordTolerance, ReconParams};
 use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
 use crate::progress::{Progress, Stage};
@@ -142,7 +142,8 @@ fn simplify_to_chord_error(
     let field = fit.field.as_ref();
     let d: Vec<f64> = (mesh.triangles.par_iter().step_by(step))
         .map(|t| {
-            let c = [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
+            let c = [0, 1, 2]
+                .map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
             let g = crate::geometry::norm(field.gradient(&c));
             let f = field.value(&c).abs();
             if g > 0.0 { f / g } else { f }

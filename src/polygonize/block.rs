@@ -126,7 +126,13 @@ fn sample_corners(
 ) -> Sampling {
     let tiles = tile_counts(dims);
     let count = tiles[0] * tiles[1] * tiles[2];
-    let t3_of = |t: usize| [t % tiles[0], (t / tiles[0]) % tiles[1], t / (tiles[0] * tiles[1])];
+    let t3_of = |t: usize| {
+        [
+            t % tiles[0],
+            (t / tiles[0]) % tiles[1],
+            t / (tiles[0] * tiles[1]),
+        ]
+    };
     let tile_box = |t3: [usize; 3]| tile_region(grid, lo, dims, t3);
     let mut s = Sampling {
         values: vec![f64::NAN; dims.iter().product()],
@@ -148,7 +154,8 @@ fn sample_corners(
     while !queue.is_empty() {
         queue.sort_unstable();
         for &t in &queue {
-            s.evaluations += sample_tile(field, grid, lo, dims, t3_of(t), &mut s.values, &mut scratch);
+            s.evaluations +=
+                sample_tile(field, grid, lo, dims, t3_of(t), &mut s.values, &mut scratch);
         }
         let mut next = Vec::new();
         for &t in &queue {
@@ -308,7 +315,9 @@ impl Block<'_> {
             let n = self.tiles;
             [t % n[0], (t / n[0]) % n[1], t / (n[0] * n[1])]
         };
-        for group in order.chunk_by(|a, b| self.roots[*a as usize].tile == self.roots[*b as usize].tile) {
+        for group in
+            order.chunk_by(|a, b| self.roots[*a as usize].tile == self.roots[*b as usize].tile)
+        {
             let roots: Vec<EdgeRoot> = group.iter().map(|&v| self.roots[v as usize]).collect();
             let region = tile_region(self.grid, self.lo, self.dims, t3_of(roots[0].tile));
             let (positions, normals, evaluations) =

@@ -199,8 +199,8 @@ fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
 /// [`crate::params::BLOCKS_PATTERN`], `chord-error` by [`crate::params::CHORD_ERROR_PATTERN`].
 fn check_spelling(name: &str, value: &str) -> Result<(), ApiError> {
     if name == "chord-error" {
-        let decimal = value.parse::<f64>().is_ok()
-            && value.bytes().all(|b| b.is_ascii_digit() || b == b'.');
+        let decimal =
+            value.parse::<f64>().is_ok() && value.bytes().all(|b| b.is_ascii_digit() || b == b'.');
         if !(decimal || value == "off") {
             return Err(ApiError::bad_parameter(format!(
                 "invalid parameter chord-error = {value}: off or a fraction of the point spacing (a decimal number, e.g. 0.1)"
