@@ -287,6 +287,10 @@ impl ScalarField for RbfField {
         g
     }
 
+    /// The polygonizer follows the zero set into skipped tiles from sampled ones, so a wrong
+    /// answer can only lose a piece lying wholly in skipped cells, all farther than the finest
+    /// support radius from the data (see [`crate::polygonize::polygonize_in`]).
+    ///
     /// Active when a data point's support reaches the cell; elsewhere the field is the carrier
     /// and the coarser levels, decided by a Lipschitz bound for a single-level global field with an
     /// analytic carrier, else by sign changes or a value below the cell's half diagonal at the 8
