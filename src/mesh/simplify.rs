@@ -6,8 +6,9 @@
 //!
 //! The result is kept only when its topology is the input's (components, watertight, manifold,
 //! oriented, boundary loops, Euler characteristic, genus). Edge collapses do not check the link
-//! condition, so a collapse can fold two sheets onto a non-manifold edge; then the vertices around
-//! each such defect are locked and the simplification redone (up to [`LOCK_ROUNDS`] times), and
+//! condition, so a collapse can fold two sheets onto a non-manifold edge, and a small piece can
+//! collapse away; then the vertices around each such defect (all of a vanished piece's) are locked
+//! and the simplification redone (up to [`LOCK_ROUNDS`] times), and
 //! when that does not help the tolerance is halved, up to [`ATTEMPTS`] times, and the input is kept as it is when no attempt preserves it. Open borders are
 //! locked (they stay exactly where trimming put them). `O(F log F)` for `F` triangles.
 
@@ -91,6 +92,7 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
     let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
     let options = meshopt::SimplifyOptions::ErrorAbsolute | meshopt::SimplifyOptions::LockBorder;
     let original_border = border_edges(&mesh.triangles);
+    let pieces = vertex_components(mesh);
     let mut locks = vec![false; mesh.vertices.len()];
     let mut tol = tolerance;
     for _ in 0..ATTEMPTS {
@@ -119,7 +121,9 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
                 mesh.triangles = probe.triangles;
                 return stats;
             }
-            if !lock_around_defects(mesh, &probe.triangles, &original_border, &mut locks) {
+            let local = lock_around_defects(mesh, &probe.triangles, &original_border, &mut locks);
+            let vanished = lock_vanished_components(&pieces, &probe.triangles, &mut locks);
+            if !(local || vanished) {
                 break;
             }
         }
@@ -138,6 +142,44 @@ fn border_edges(triangles: &[[u32; 3]]) -> HashSet<(u32, u32)> {
         .filter(|&(_, n)| n == 1)
         .map(|(e, _)| e)
         .collect()
+}
+
+/// The connected component of every vertex (`u32::MAX` for a vertex no triangle uses).
+fn vertex_components(mesh: &TriMesh) -> Vec<u32> {
+    let (labels, _) = crate::mesh::topology::triangle_components(mesh);
+    let mut of = vec![u32::MAX; mesh.vertices.len()];
+    for (t, &c) in mesh.triangles.iter().zip(&labels) {
+        for &v in t {
+            of[v as usize] = c;
+        }
+    }
+    of
+}
+
+/// Locks every vertex of each input component (`pieces`: component per vertex) that lost all its
+/// triangles in `triangles` (a small piece collapsed away). Returns whether anything new was locked.
+fn lock_vanished_components(pieces: &[u32], triangles: &[[u32; 3]], locks: &mut [bool]) -> bool {
+    let count = pieces
+        .iter()
+        .filter(|&&c| c != u32::MAX)
+        .map(|&c| c as usize + 1)
+        .max();
+    let mut alive = vec![false; count.unwrap_or(0)];
+    for t in triangles {
+        if let Some(&c) = pieces.get(t[0] as usize)
+            && c != u32::MAX
+        {
+            alive[c as usize] = true;
+        }
+    }
+    let mut changed = false;
+    for (v, &c) in pieces.iter().enumerate() {
+        if c != u32::MAX && !alive[c as usize] && !locks[v] {
+            locks[v] = true;
+            changed = true;
+        }
+    }
+    changed
 }
 
 /// Uses of every undirected edge.
