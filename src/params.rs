@@ -200,8 +200,11 @@ impl std::str::FromStr for ChordTolerance {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "off" => Ok(ChordTolerance::Off),
+            "auto" => Ok(ChordTolerance::default()),
             _ => s.parse::<f64>().map(ChordTolerance::Spacing).map_err(|_| {
-                format!("chord-error '{s}': use off or a fraction of the point spacing, e.g. 0.1")
+                format!(
+                    "chord-error '{s}': use auto, off or a fraction of the point spacing, e.g. 0.05"
+                )
             }),
         }
     }
@@ -216,8 +219,9 @@ impl std::fmt::Display for ChordTolerance {
     }
 }
 
-/// `chord-error`: `off` or a fraction of the point spacing (a plain decimal number).
-pub const CHORD_ERROR_PATTERN: &str = "^(off|[0-9]+(\\.[0-9]+)?|\\.[0-9]+)$";
+/// `chord-error`: `auto` (the default, [`DEFAULT_CHORD_SPACING`]), `off` or a fraction of the point
+/// spacing (a plain decimal number).
+pub const CHORD_ERROR_PATTERN: &str = "^(auto|off|[0-9]+(\\.[0-9]+)?|\\.[0-9]+)$";
 
 impl Default for ReconParams {
     fn default() -> Self {
@@ -601,7 +605,7 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub color: Option<crate::mesh::ColorMode>,
-    /// Chord error of the output mesh, as a fraction of the median point spacing (default 0.05): the grid's triangles are merged by edge collapses while the mesh stays this close to the polygonized surface and keeps its topology, so flat parts get few large triangles; off keeps every grid triangle. The report gives the tolerance and the chord error measured on the result (polygonize.chord_error_*).
+    /// Chord error of the output mesh, as a fraction of the median point spacing (auto = the default 0.05): the grid's triangles are merged by edge collapses while the mesh stays this close to the polygonized surface and keeps its topology, so flat parts get few large triangles; off keeps every grid triangle. The report gives the tolerance and the chord error measured on the result (polygonize.chord_error_*).
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]

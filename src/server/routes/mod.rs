@@ -201,9 +201,9 @@ fn check_spelling(name: &str, value: &str) -> Result<(), ApiError> {
     if name == "chord-error" {
         let decimal =
             value.parse::<f64>().is_ok() && value.bytes().all(|b| b.is_ascii_digit() || b == b'.');
-        if !(decimal || value == "off") {
+        if !(decimal || value == "off" || value == "auto") {
             return Err(ApiError::bad_parameter(format!(
-                "invalid parameter chord-error = {value}: off or a fraction of the point spacing (a decimal number, e.g. 0.1)"
+                "invalid parameter chord-error = {value}: auto, off or a fraction of the point spacing (a decimal number, e.g. 0.1)"
             )));
         }
     }
