@@ -277,6 +277,19 @@ pub struct PolygonizeReport {
     pub small_component_triangles: usize,
     /// Grid cell edge, normalised units.
     pub cell_size: f64,
+    /// Triangles before the chord-error simplification.
+    pub triangles_before_simplify: usize,
+    /// Chord-error tolerance of the simplification, normalised units (`--chord-error` × the
+    /// median point spacing); null with `--chord-error off`.
+    pub chord_tolerance: Option<f64>,
+    /// meshoptimizer's measure of the simplified mesh's deviation from the grid mesh, normalised
+    /// units (0 when nothing was simplified).
+    pub simplify_error: f64,
+    /// Largest chord error measured on the output: `|f| / |∇f|` (first-order distance to the fitted
+    /// surface) at triangle centroids (every k-th triangle, at most 20,000), normalised units.
+    pub chord_error_max: f64,
+    /// Mean of the same, normalised units.
+    pub chord_error_mean: f64,
 }
 
 /// Peak resident set size of this process in MiB (reads `/proc/self/status`; 0 elsewhere).

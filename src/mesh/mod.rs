@@ -13,6 +13,7 @@ pub mod compare;
 mod distance;
 pub mod floaters;
 pub mod optimize;
+pub mod simplify;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 pub mod topology;

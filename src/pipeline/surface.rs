@@ -24,17 +24,19 @@
 //! ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary loop per
 //! border or hole. Every surface then loses its floaters (components carried by fewer than
 //! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
-//! pieces.
+//! pieces, and is simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology kept).
 
 use super::FittedField;
 use crate::error::ReconError;
 use crate::geometry::{Aabb, TriMesh};
+use crate::mesh::simplify;
 use crate::mesh::{area, floaters, trim};
-use crate::params::{Boundary, ReconParams};
+use crate::params::{Boundary, ChordTolerance, ReconParams};
 use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
 use crate::progress::{Progress, Stage};
 use crate::rbf::CarrierKind;
 use crate::report::PolygonizeReport;
+use rayon::prelude::*;
 
 /// Share of unsupported surface area above which `--boundary auto` trims: an open scan's
 /// extrapolated sheet is a large part of the surface; a closed scan's sparse patches are a tiny one.
@@ -109,7 +111,46 @@ pub(crate) fn extract_surface(
     let (drop, n) = trim::small_components(&mesh, params.min_component);
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
+    simplify_to_chord_error(fit, params, &mut mesh, &mut s);
     Ok((mesh, open, s))
+}
+
+/// Centroids sampled for the measured chord error (every k-th triangle beyond this many).
+const CHORD_SAMPLES: usize = 20_000;
+
+/// Simplifies `mesh` (normalised units) to `params.chord_error` and records the tolerance, the
+/// triangle counts and the chord error measured on the result: `|f| / |∇f|` (the first-order
+/// distance to the zero set) at the centroids of the triangles (every k-th, at most
+/// [`CHORD_SAMPLES`]); the grid mesh's own vertices lie on the zero set, its chords do not.
+fn simplify_to_chord_error(
+    fit: &FittedField,
+    params: &ReconParams,
+    mesh: &mut TriMesh,
+    s: &mut PolygonizeReport,
+) {
+    s.triangles_before_simplify = mesh.triangles.len();
+    if let ChordTolerance::Spacing(x) = params.chord_error
+        && fit.support.spacing.is_finite()
+        && fit.support.spacing > 0.0
+    {
+        let tol = x * fit.support.spacing;
+        let stats = simplify::simplify_to_tolerance(mesh, tol);
+        s.chord_tolerance = Some(tol);
+        s.simplify_error = stats.error;
+    }
+    let step = mesh.triangles.len().div_ceil(CHORD_SAMPLES).max(1);
+    let field = fit.field.as_ref();
+    let d: Vec<f64> = (mesh.triangles.par_iter().step_by(step))
+        .map(|t| {
+            let c = [0, 1, 2]
+                .map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
+            let g = crate::geometry::norm(field.gradient(&c));
+            let f = field.value(&c).abs();
+            if g > 0.0 { f / g } else { f }
+        })
+        .collect();
+    s.chord_error_max = d.iter().fold(0.0, |a: f64, &b| a.max(b));
+    s.chord_error_mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
 }
 
 /// Share of the surface area farther than the support radius from every data point, measured on

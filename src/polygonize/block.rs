@@ -1,5 +1,6 @@
-//! Marching tetrahedra inside one block of the grid: sample the block's corners, triangulate every cell
-//! with the Kuhn case table, and place each vertex on its grid edge (linear interpolation plus a few
+//! Marching tetrahedra inside one block of the grid: sample the corners of the block's tiles that may
+//! hold the zero set (and of every tile it enters from one of those), triangulate the cells of the
+//! sampled tiles with the Kuhn case table, and place each vertex on its grid edge (linear interpolation plus a few
 //! safeguarded Illinois regula-falsi steps, Dowell & Jarratt 1971).
 //!
 //! `O(c + v · s)` field evaluations for `c` block corners, `v` vertices and `s` refinement steps.
@@ -8,8 +9,21 @@
 
 use super::grid::Grid;
 use super::kuhn::{CubeEdge, TETS, TetCase};
+use super::refine::{EdgeRoot, place_vertices};
 use super::{Region, ScalarField};
-use crate::geometry::{Aabb, Point3, add, normalized, scale, sub};
+use crate::geometry::{Aabb, Point3};
+
+/// How a tile of a block was treated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum TileState {
+    /// Outside the [`Region`]: not sampled, none of its cells is triangulated.
+    Outside,
+    /// Ruled out by [`ScalarField::may_contain_zero`] and not demanded by a sampled neighbour: not
+    /// sampled, none of its cells is triangulated.
+    Skipped,
+    /// Every corner evaluated; its cells are triangulated.
+    Sampled,
+}
 
 /// The triangles and vertices of one block, with block-local vertex indices.
 #[derive(Debug, Default)]
@@ -24,6 +38,11 @@ pub(crate) struct BlockMesh {
     pub triangles: Vec<[u32; 3]>,
     /// Field evaluations spent.
     pub evaluations: u64,
+    /// State of every tile of the block (x fastest).
+    pub tiles: Vec<TileState>,
+    /// Global tile coordinates (cell index / [`TILE`]) outside this block that must be sampled:
+    /// the zero set crosses a cell face they share with a sampled tile of this block.
+    pub demands: Vec<[usize; 3]>,
 }
 
 /// Inside test: `f < 0`. Zero (and NaN) counts as outside, so no corner lies on the surface.
@@ -40,105 +59,200 @@ struct Block<'a> {
     lo: [usize; 3],
     /// Corners per axis (`cells + 1`).
     dims: [usize; 3],
+    /// Tiles per axis.
+    tiles: [usize; 3],
     values: Vec<f64>,
     /// Local edge slot (`local corner · 7 + dir − 1`) → local vertex index, `u32::MAX` when absent.
     slots: Vec<u32>,
+    /// The edge of every vertex, placed once all cells are triangulated.
+    roots: Vec<EdgeRoot>,
+    /// Local tile of the cell being triangulated.
+    tile: usize,
     refine_steps: usize,
     out: BlockMesh,
 }
 
-/// Cells per axis of the tiles a block is sampled in.
-const TILE: usize = 4;
+/// Cells per axis of the tiles a block is sampled in (divides the block edge, so tiles are aligned
+/// over the whole grid: global tile = global cell / `TILE`).
+pub(crate) const TILE: usize = 4;
 
-/// Field values at the `dims` corners starting at grid corner `lo`, x fastest, plus the number of
-/// field evaluations spent.
+/// Tiles per axis of a block with `dims` corners per axis.
+pub(crate) fn tile_counts(dims: [usize; 3]) -> [usize; 3] {
+    [0, 1, 2].map(|a| (dims[a] - 1).div_ceil(TILE).max(1))
+}
+
+/// The corners of one block, sampled tile by tile.
 ///
-/// A tile outside `keep` is not sampled either: its corners get `+∞` (outside). None of its cells
-/// is triangulated (the region is monotone, so no cell of the tile touches it), so these values are
-/// never used for geometry.
-///
-/// The block is cut into tiles of `TILE³` cells. A tile the field rules out
-/// (`may_contain_zero(tile) == false`, so `f` has one sign on the closed tile) is not sampled: its
-/// corners get the value at the tile's centre, which has that sign. Only edges with a sign change are
-/// interpolated, and no such edge lies in a ruled-out tile, so these stand-in values are never used
-/// for geometry. Corners of the other tiles are evaluated with [`ScalarField::values_in`], once each.
+/// A tile outside `keep` ([`TileState::Outside`]) and a tile the field rules out
+/// (`may_contain_zero(tile) == false`, [`TileState::Skipped`]) are not sampled (their corners stay
+/// NaN) and none of their cells is triangulated. A skipped tile is sampled after all when the zero
+/// set, as seen on the corners of a sampled neighbour, crosses a cell face the two share (a face
+/// whose four corners do not all have one sign), and so on until no sampled face with a sign change
+/// borders a skipped tile; faces on the block's border give [`BlockMesh::demands`] to the caller.
+/// So the skip test is an optimisation only: every piece of the zero set that meets a sampled cell
+/// is extracted whole, whatever the test answers (see [`super::extract`]).
+struct Sampling {
+    values: Vec<f64>,
+    tiles: Vec<TileState>,
+    evaluations: u64,
+    demands: Vec<[usize; 3]>,
+}
+
+/// Local corners `[c0, c1]` (inclusive) of tile `t3`.
+fn tile_corners(t3: [usize; 3], dims: [usize; 3]) -> ([usize; 3], [usize; 3]) {
+    let c0 = t3.map(|a| a * TILE);
+    let c1 = [0, 1, 2].map(|a| (c0[a] + TILE).min(dims[a] - 1));
+    (c0, c1)
+}
+
+/// Closed box of tile `t3` of the block at grid cell `lo` with `dims` corners per axis.
+fn tile_region(grid: &Grid, lo: [usize; 3], dims: [usize; 3], t3: [usize; 3]) -> Aabb {
+    let (c0, c1) = tile_corners(t3, dims);
+    Aabb {
+        min: grid.corner([0, 1, 2].map(|a| lo[a] + c0[a])),
+        max: grid.corner([0, 1, 2].map(|a| lo[a] + c1[a])),
+    }
+}
+
+/// Samples the corners of the block at grid cell `lo` with `dims` corners per axis; `forced` lists
+/// tiles (local index, x fastest) to sample whatever the skip test says.
 fn sample_corners(
     field: &dyn ScalarField,
     keep: &dyn Region,
     grid: &Grid,
     lo: [usize; 3],
     dims: [usize; 3],
-) -> (Vec<f64>, u64) {
-    let mut values = vec![f64::NAN; dims.iter().product()];
-    let idx = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
-    let tiles = [0, 1, 2].map(|a| (dims[a] - 1).div_ceil(TILE).max(1));
-    let mut skipped = Vec::new();
-    let (mut pts, mut out, mut slots) = (Vec::new(), Vec::new(), Vec::new());
-    let mut evaluations = 0u64;
-    for t in 0..tiles[0] * tiles[1] * tiles[2] {
-        let t3 = [
+    forced: &[usize],
+) -> Sampling {
+    let tiles = tile_counts(dims);
+    let count = tiles[0] * tiles[1] * tiles[2];
+    let t3_of = |t: usize| {
+        [
             t % tiles[0],
             (t / tiles[0]) % tiles[1],
             t / (tiles[0] * tiles[1]),
-        ];
-        let c0 = t3.map(|a| a * TILE);
-        let c1 = [0, 1, 2].map(|a| (c0[a] + TILE).min(dims[a] - 1));
-        let region = Aabb {
-            min: grid.corner([lo[0] + c0[0], lo[1] + c0[1], lo[2] + c0[2]]),
-            max: grid.corner([lo[0] + c1[0], lo[1] + c1[1], lo[2] + c1[2]]),
-        };
+        ]
+    };
+    let tile_box = |t3: [usize; 3]| tile_region(grid, lo, dims, t3);
+    let mut s = Sampling {
+        values: vec![f64::NAN; dims.iter().product()],
+        tiles: vec![TileState::Skipped; count],
+        evaluations: 0,
+        demands: Vec::new(),
+    };
+    let mut queue = Vec::new();
+    for t in 0..count {
+        let region = tile_box(t3_of(t));
         if !keep.touches(&region) {
-            skipped.push((c0, c1, None));
-            continue;
+            s.tiles[t] = TileState::Outside;
+        } else if forced.contains(&t) || field.may_contain_zero(&region) {
+            s.tiles[t] = TileState::Sampled;
+            queue.push(t);
         }
-        if !field.may_contain_zero(&region) {
-            skipped.push((c0, c1, Some(region.center())));
-            continue;
+    }
+    let mut scratch = (Vec::new(), Vec::new(), Vec::new());
+    while !queue.is_empty() {
+        queue.sort_unstable();
+        for &t in &queue {
+            s.evaluations +=
+                sample_tile(field, grid, lo, dims, t3_of(t), &mut s.values, &mut scratch);
         }
-        pts.clear();
-        slots.clear();
-        for k in c0[2]..=c1[2] {
-            for j in c0[1]..=c1[1] {
-                for i in c0[0]..=c1[0] {
-                    if values[idx(i, j, k)].is_nan() {
-                        pts.push(grid.corner([lo[0] + i, lo[1] + j, lo[2] + k]));
-                        slots.push(idx(i, j, k));
+        let mut next = Vec::new();
+        for &t in &queue {
+            for (a, step) in crossed_faces(&s.values, dims, t3_of(t)) {
+                let t3 = t3_of(t);
+                let n = t3[a] as isize + step;
+                if n >= 0 && (n as usize) < tiles[a] {
+                    let mut n3 = t3;
+                    n3[a] = n as usize;
+                    let nt = n3[0] + tiles[0] * (n3[1] + tiles[1] * n3[2]);
+                    if s.tiles[nt] == TileState::Skipped {
+                        s.tiles[nt] = TileState::Sampled;
+                        next.push(nt);
+                    }
+                } else {
+                    let g = (lo[a] / TILE) as isize + n;
+                    if g >= 0 && (g as usize) < grid.cells[a].div_ceil(TILE) {
+                        let mut g3 = [0, 1, 2].map(|k| lo[k] / TILE + t3[k]);
+                        g3[a] = g as usize;
+                        s.demands.push(g3);
                     }
                 }
             }
         }
-        out.resize(pts.len(), 0.0);
-        field.values_in(&region, &pts, &mut out);
-        evaluations += pts.len() as u64;
-        for (&s, &v) in slots.iter().zip(&out) {
-            // A NaN from the field is stored as +inf: outside, and never re-evaluated.
-            values[s] = if v.is_nan() { f64::INFINITY } else { v };
-        }
+        queue = next;
     }
-    for (c0, c1, centre) in skipped {
-        let v = centre.map_or(f64::INFINITY, |c| {
-            evaluations += 1;
-            let v = field.value(&c);
-            if v.is_nan() || v == 0.0 {
-                f64::INFINITY
-            } else {
-                v
-            }
-        });
-        for k in c0[2]..=c1[2] {
-            for j in c0[1]..=c1[1] {
-                for i in c0[0]..=c1[0] {
-                    if values[idx(i, j, k)].is_nan() {
-                        values[idx(i, j, k)] = v;
-                    }
-                }
-            }
-        }
-    }
-    (values, evaluations)
+    s.demands.sort_unstable();
+    s.demands.dedup();
+    s
 }
 
-/// Extracts the zero set inside block `b` of `grid`.
+/// Evaluates the not yet known corners of tile `t3` with one [`ScalarField::values_in`] call.
+fn sample_tile(
+    field: &dyn ScalarField,
+    grid: &Grid,
+    lo: [usize; 3],
+    dims: [usize; 3],
+    t3: [usize; 3],
+    values: &mut [f64],
+    (pts, out, slots): &mut (Vec<Point3>, Vec<f64>, Vec<usize>),
+) -> u64 {
+    let (c0, c1) = tile_corners(t3, dims);
+    let idx = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
+    let region = tile_region(grid, lo, dims, t3);
+    pts.clear();
+    slots.clear();
+    for k in c0[2]..=c1[2] {
+        for j in c0[1]..=c1[1] {
+            for i in c0[0]..=c1[0] {
+                if values[idx(i, j, k)].is_nan() {
+                    pts.push(grid.corner([lo[0] + i, lo[1] + j, lo[2] + k]));
+                    slots.push(idx(i, j, k));
+                }
+            }
+        }
+    }
+    out.resize(pts.len(), 0.0);
+    field.values_in(&region, pts, out);
+    for (&s, &v) in slots.iter().zip(out.iter()) {
+        // A NaN from the field is stored as +inf: outside, and never re-evaluated.
+        values[s] = if v.is_nan() { f64::INFINITY } else { v };
+    }
+    pts.len() as u64
+}
+
+/// The faces of sampled tile `t3` (as `(axis, −1 | +1)`) on which some cell face has corners of
+/// both signs: the zero set crosses into the neighbouring tile there.
+fn crossed_faces(values: &[f64], dims: [usize; 3], t3: [usize; 3]) -> Vec<(usize, isize)> {
+    let (c0, c1) = tile_corners(t3, dims);
+    let idx = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let mut faces = Vec::new();
+    for a in 0..3 {
+        let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+        for (plane, step) in [(c0[a], -1), (c1[a], 1)] {
+            let mut c = [0; 3];
+            c[a] = plane;
+            let crossed = (c0[u]..c1[u]).any(|i| {
+                (c0[v]..c1[v]).any(|j| {
+                    let mut signs = [false; 4];
+                    for (n, (di, dj)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                        c[u] = i + di;
+                        c[v] = j + dj;
+                        signs[n] = inside(values[idx(c)]);
+                    }
+                    signs.iter().any(|&x| x != signs[0])
+                })
+            });
+            if crossed {
+                faces.push((a, step));
+            }
+        }
+    }
+    faces
+}
+
+/// Extracts the zero set inside block `b` of `grid`, sampling the tiles in `forced` (local tile
+/// indices) whatever the skip test says.
 pub(crate) fn extract_block(
     field: &dyn ScalarField,
     region: &dyn Region,
@@ -146,16 +260,21 @@ pub(crate) fn extract_block(
     table: &[[TetCase; 16]; 6],
     b: usize,
     refine_steps: usize,
+    forced: &[usize],
 ) -> BlockMesh {
     let (lo, hi) = grid.block_cells(b);
     let dims = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-    let (values, evaluations) = sample_corners(field, region, grid, lo, dims);
+    let sampled = sample_corners(field, region, grid, lo, dims, forced);
+    let out = BlockMesh {
+        evaluations: sampled.evaluations,
+        tiles: sampled.tiles,
+        demands: sampled.demands,
+        ..BlockMesh::default()
+    };
+    let values = sampled.values;
     let first = values.first().is_some_and(|&f| inside(f));
     if values.iter().all(|&f| inside(f) == first) {
-        return BlockMesh {
-            evaluations,
-            ..BlockMesh::default()
-        };
+        return out;
     }
     let mut block = Block {
         field,
@@ -163,25 +282,54 @@ pub(crate) fn extract_block(
         grid,
         lo,
         dims,
+        tiles: tile_counts(dims),
         slots: vec![u32::MAX; values.len() * 7],
         values,
+        roots: Vec::new(),
+        tile: 0,
         refine_steps,
-        out: BlockMesh {
-            evaluations,
-            ..BlockMesh::default()
-        },
+        out,
     };
     for k in 0..dims[2] - 1 {
         for j in 0..dims[1] - 1 {
             for i in 0..dims[0] - 1 {
-                block.cell([i, j, k], table);
+                let t = i / TILE + block.tiles[0] * (j / TILE + block.tiles[1] * (k / TILE));
+                if block.out.tiles[t] == TileState::Sampled {
+                    block.tile = t;
+                    block.cell([i, j, k], table);
+                }
             }
         }
     }
+    block.place_vertices();
     block.out
 }
 
 impl Block<'_> {
+    /// Places every vertex on its edge, the vertices of one tile together
+    /// ([`place_vertices`]).
+    fn place_vertices(&mut self) {
+        let mut order: Vec<u32> = (0..self.roots.len() as u32).collect();
+        order.sort_by_key(|&v| self.roots[v as usize].tile);
+        let t3_of = |t: usize| {
+            let n = self.tiles;
+            [t % n[0], (t / n[0]) % n[1], t / (n[0] * n[1])]
+        };
+        for group in
+            order.chunk_by(|a, b| self.roots[*a as usize].tile == self.roots[*b as usize].tile)
+        {
+            let roots: Vec<EdgeRoot> = group.iter().map(|&v| self.roots[v as usize]).collect();
+            let region = tile_region(self.grid, self.lo, self.dims, t3_of(roots[0].tile));
+            let (positions, normals, evaluations) =
+                place_vertices(self.field, &region, &roots, self.refine_steps);
+            for ((&v, p), n) in group.iter().zip(positions).zip(normals) {
+                self.out.positions[v as usize] = p;
+                self.out.normals[v as usize] = n;
+            }
+            self.out.evaluations += evaluations;
+        }
+    }
+
     /// Local corner index of local corner `c`.
     #[inline]
     fn local(&self, c: [usize; 3]) -> usize {
@@ -247,109 +395,20 @@ impl Block<'_> {
         } else {
             (pb, fb, pa, fa)
         };
-        let (p, evals) = locate(self.field, (p_in, f_in), (p_out, f_out), self.refine_steps);
-        self.out.evaluations += evals;
-        let normal = normalized(self.field.gradient(&p))
-            .or_else(|| normalized(sub(p_out, p_in)))
-            .unwrap_or([0.0, 0.0, 1.0]);
         let index = self.out.positions.len() as u32;
-        self.out.positions.push(p);
-        self.out.normals.push(normal);
+        self.out.positions.push(p_in);
+        self.out.normals.push([0.0; 3]);
+        self.roots.push(EdgeRoot {
+            p_in,
+            f_in,
+            p_out,
+            f_out,
+            tile: self.tile,
+        });
         self.out
             .edge_ids
             .push(self.grid.corner_id(ga) * 7 + dir as u64 - 1);
         self.slots[slot] = index;
         index
-    }
-}
-
-/// Root of the field on the segment from `p_in` (`f_in < 0`) to `p_out` (`f_out ≥ 0` or NaN): linear
-/// interpolation, then `steps` safeguarded steps. The sign bracket always keeps one inside and one
-/// outside end; a step takes inverse quadratic interpolation through the three best samples when it
-/// lands inside the bracket no farther from the best sample than the bracket's midpoint (Brent 1973),
-/// else Anderson–Björck regula falsi on the bracket, else bisection (e.g. for NaN values).
-/// Returns the point and the number of field evaluations.
-fn locate(
-    field: &dyn ScalarField,
-    (p_in, f_in): (Point3, f64),
-    (p_out, f_out): (Point3, f64),
-    steps: usize,
-) -> (Point3, u64) {
-    let at = |t: f64| add(p_in, scale(sub(p_out, p_in), t));
-    if f_out == 0.0 {
-        return (p_out, 0);
-    }
-    let mut r = Bracket {
-        lo: (0.0, f_in),
-        hi: (1.0, f_out),
-        weights: [f_in, f_out],
-        last_side: 0,
-        best: vec![(0.0, f_in), (1.0, f_out)],
-    };
-    let mut t = r.estimate();
-    let mut evals = 0;
-    for _ in 0..steps {
-        let f = field.value(&at(t));
-        evals += 1;
-        if f == 0.0 {
-            return (at(t), evals);
-        }
-        r.update(t, f);
-        t = r.estimate();
-    }
-    (at(t), evals)
-}
-
-/// State of the safeguarded root search on `t ∈ [0, 1]`.
-struct Bracket {
-    /// Inside end `(t, f)`, `f < 0`.
-    lo: (f64, f64),
-    /// Outside end `(t, f)`, `f ≥ 0` or NaN.
-    hi: (f64, f64),
-    /// Anderson–Björck-scaled values of `lo` and `hi` used by regula falsi.
-    weights: [f64; 2],
-    /// Which end the previous sample replaced: −1 inside, +1 outside, 0 none yet.
-    last_side: i8,
-    /// Up to three samples with the smallest `|f|`, best first.
-    best: Vec<(f64, f64)>,
-}
-
-impl Bracket {
-    /// Records the sample `(t, f)` (`f ≠ 0`) and shrinks the bracket.
-    fn update(&mut self, t: f64, f: f64) {
-        if inside(f) {
-            if self.last_side == -1 {
-                let m = 1.0 - f / self.weights[0];
-                self.weights[1] *= if m > 0.0 { m } else { 0.5 };
-            }
-            (self.lo, self.weights[0], self.last_side) = ((t, f), f, -1);
-        } else {
-            if self.last_side == 1 {
-                let m = 1.0 - f / self.weights[1];
-                self.weights[0] *= if m > 0.0 { m } else { 0.5 };
-            }
-            (self.hi, self.weights[1], self.last_side) = ((t, f), f, 1);
-        }
-        self.best.push((t, f));
-    }
-
-    /// Next root estimate, strictly inside the bracket.
-    fn estimate(&mut self) -> f64 {
-        self.best.sort_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-        self.best.truncate(3);
-        let (lo, hi) = (self.lo.0, self.hi.0);
-        let mid = 0.5 * (lo + hi);
-        let b = self.best[0].0;
-        if let [(x0, y0), (x1, y1), (x2, y2)] = self.best[..] {
-            let t = x0 * y1 * y2 / ((y0 - y1) * (y0 - y2))
-                + x1 * y0 * y2 / ((y1 - y0) * (y1 - y2))
-                + x2 * y0 * y1 / ((y2 - y0) * (y2 - y1));
-            if t > lo && t < hi && (t - b).abs() <= (mid - b).abs() {
-                return t;
-            }
-        }
-        let [w0, w1] = self.weights;
-        let t = lo + (hi - lo) * w0 / (w0 - w1);
-        if t > lo && t < hi { t } else { mid }
     }
 }

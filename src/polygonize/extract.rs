@@ -1,7 +1,13 @@
 //! Sparse, parallel, watertight extraction of a field's zero set: the polygonizer's entry point.
 //!
-//! The domain is covered by a grid of cubic cells split into blocks of 16³ cells. Only blocks for which
-//! [`ScalarField::may_contain_zero`] answers true are processed (the narrow band); each is triangulated
+//! The domain is covered by a grid of cubic cells split into blocks of 16³ cells, sampled in tiles of
+//! 4³ cells. Only blocks and tiles for which [`ScalarField::may_contain_zero`] answers true are sampled
+//! (the narrow band), plus every skipped tile the zero set enters through a cell face of a sampled
+//! tile (a face whose corners have both signs), repeated across tiles and blocks to a fix point. So
+//! the mesh is exactly the one without any skipping, vertex for vertex, except for connected pieces
+//! of the zero set that lie entirely in skipped tiles; for the fitted fields those are farther than
+//! the support radius from every data point ([`crate::rbf::RbfField`]), i.e. floaters that carry no
+//! data. Each block is triangulated
 //! in parallel (rayon) by marching tetrahedra on the Kuhn 6-tetrahedra split (Doi & Koide 1991, "An
 //! efficient method of triangulating equi-valued surfaces by using tetrahedral cells"), which — unlike
 //! 256-case marching cubes (Lorensen & Cline 1987) — has no ambiguous faces, so the result is closed,
@@ -13,16 +19,16 @@
 //! triangulated only when its box touches the region. Inside the region the mesh is exactly the one
 //! [`polygonize`] gives (same grid, same vertices); it ends, open, at cell faces on the region's border.
 //!
-//! Cost: one field evaluation per corner of each active block plus `refine_steps + 1` per vertex
+//! Cost: one field evaluation per corner of each sampled tile plus `refine_steps + 1` per vertex
 //! (value and gradient), `O(active cells)` work and memory.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 
-use super::block::{BlockMesh, extract_block};
+use super::block::{BlockMesh, TileState, extract_block};
 use super::grid::Grid;
 use super::kuhn::case_table;
 use super::params::{PolygonizeError, PolygonizeParams, PolygonizeStats};
@@ -99,30 +105,72 @@ pub fn polygonize_in(
     progress.fraction(CLASSIFY_SHARE);
     let done = AtomicUsize::new(0);
     let report_every = (active.len() / 200).max(1);
-    let meshes: Vec<BlockMesh> = active
-        .par_iter()
-        .map(|&b| {
-            if progress.cancelled() {
-                return Err(PolygonizeError::Cancelled);
-            }
-            let mesh = extract_block(field, region, &grid, &table, b, params.refine_steps);
-            let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if finished.is_multiple_of(report_every) {
-                let share = finished as f64 / active.len() as f64;
-                progress.fraction(CLASSIFY_SHARE + (0.95 - CLASSIFY_SHARE) * share);
-            }
-            Ok(mesh)
-        })
-        .collect::<Result<_, _>>()?;
+    let mut meshes: BTreeMap<usize, BlockMesh> = BTreeMap::new();
+    let mut forced: HashMap<usize, Vec<usize>> = HashMap::new();
+    let mut todo = active;
+    while !todo.is_empty() {
+        let expected = todo.len().max(report_every);
+        let round: Vec<(usize, BlockMesh)> = todo
+            .par_iter()
+            .map(|&b| {
+                if progress.cancelled() {
+                    return Err(PolygonizeError::Cancelled);
+                }
+                let tiles = forced.get(&b).map_or(&[][..], Vec::as_slice);
+                let mesh =
+                    extract_block(field, region, &grid, &table, b, params.refine_steps, tiles);
+                let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
+                if finished.is_multiple_of(report_every) {
+                    let share = (finished as f64 / expected as f64).min(1.0);
+                    progress.fraction(CLASSIFY_SHARE + (0.95 - CLASSIFY_SHARE) * share);
+                }
+                Ok((b, mesh))
+            })
+            .collect::<Result<_, _>>()?;
+        let processed: Vec<usize> = round.iter().map(|(b, _)| *b).collect();
+        meshes.extend(round);
+        todo = demanded_blocks(&grid, region, &meshes, &processed, &mut forced);
+    }
+    let meshes: Vec<BlockMesh> = meshes.into_values().collect();
     let mesh = weld(&meshes)?;
     progress.fraction(1.0);
     let stats = PolygonizeStats {
         cells_total: grid.cell_count(),
         blocks_total,
-        blocks_active: active.len(),
+        blocks_active: meshes.len(),
         field_evaluations: meshes.iter().map(|m| m.evaluations).sum(),
     };
     Ok((mesh, stats))
+}
+
+/// The blocks to (re-)extract because a block of `processed` found the zero set crossing into one
+/// of their tiles that is not sampled yet (skipped, or the block was not extracted at all); the
+/// tiles are added to `forced`. Blocks outside `region` are never demanded. Ascending, so each
+/// round, and the fix point, do not depend on the thread schedule.
+fn demanded_blocks(
+    grid: &Grid,
+    region: &dyn Region,
+    meshes: &BTreeMap<usize, BlockMesh>,
+    processed: &[usize],
+    forced: &mut HashMap<usize, Vec<usize>>,
+) -> Vec<usize> {
+    let mut next = BTreeSet::new();
+    for b in processed {
+        for &g in &meshes[b].demands {
+            let (nb, tile) = grid.tile_home(g);
+            match meshes.get(&nb) {
+                Some(m) if m.tiles[tile] != TileState::Skipped => continue,
+                None if !region.touches(&grid.block_box(nb)) => continue,
+                _ => {}
+            }
+            let tiles = forced.entry(nb).or_default();
+            if !tiles.contains(&tile) {
+                tiles.push(tile);
+                next.insert(nb);
+            }
+        }
+    }
+    next.into_iter().collect()
 }
 
 /// Multiplicative hasher for the (already well-spread) edge ids.
@@ -527,6 +575,58 @@ mod tests {
             (topo.components, topo.boundary_loops, topo.euler),
             (1, 1, 1)
         );
+    }
+
+    /// Wrong on purpose: says "no zero here" for every box whose centre lies beyond `x = 0.2`.
+    struct Liar(Field);
+    impl ScalarField for Liar {
+        fn value(&self, p: &Point3) -> f64 {
+            self.0.value(p)
+        }
+        fn gradient(&self, p: &Point3) -> Point3 {
+            self.0.gradient(p)
+        }
+        fn may_contain_zero(&self, cell: &Aabb) -> bool {
+            cell.center()[0] <= 0.2 && self.0.may_contain_zero(cell)
+        }
+    }
+
+    #[test]
+    fn a_wrong_skip_test_loses_only_pieces_it_hides_entirely() {
+        let params = PolygonizeParams {
+            resolution: 40,
+            ..Default::default()
+        };
+        // A sphere reaching into the hidden half is followed there from the sampled tiles: the
+        // mesh is the honest one, vertex for vertex.
+        let shape = Shape::Sphere {
+            c: [0.0; 3],
+            r: 0.6,
+        };
+        let liar = Liar(Field { shape, band: true });
+        let (mesh, _) = polygonize(&liar, &cube(1.0), &params, &NoProgress).unwrap();
+        let (honest, _) = run(shape, 40, true);
+        assert_eq!(mesh, honest);
+        // A sphere entirely inside hidden tiles is lost; the other one is exact.
+        let shape = Shape::TwoSpheres { r: 0.2, gap: 0.6 };
+        let liar = Liar(Field { shape, band: true });
+        let (mesh, _) = polygonize(&liar, &cube(1.0), &params, &NoProgress).unwrap();
+        let (honest, _) = run(shape, 40, true);
+        let topo = analyze(&mesh);
+        assert_eq!((topo.components, topo.watertight), (1, true));
+        let key = |m: &TriMesh, t: &[u32; 3]| {
+            let mut k = t.map(|v| m.vertices[v as usize].map(f64::to_bits));
+            k.sort();
+            k
+        };
+        let mut left: Vec<_> = (honest.triangles.iter())
+            .filter(|t| honest.vertices[t[0] as usize][0] < 0.0)
+            .map(|t| key(&honest, t))
+            .collect();
+        let mut got: Vec<_> = mesh.triangles.iter().map(|t| key(&mesh, t)).collect();
+        left.sort();
+        got.sort();
+        assert_eq!(got, left);
     }
 
     struct Recorder(Mutex<Vec<f64>>);

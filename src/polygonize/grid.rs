@@ -103,6 +103,18 @@ impl Grid {
         (lo, hi)
     }
 
+    /// The block holding global tile `g` (global cell / [`super::block::TILE`] per axis) and the
+    /// tile's local index in it (x fastest).
+    pub(crate) fn tile_home(&self, g: [usize; 3]) -> (usize, usize) {
+        let per = BLOCK / super::block::TILE;
+        let bi = g.map(|x| x / per);
+        let b = bi[0] + self.blocks[0] * (bi[1] + self.blocks[1] * bi[2]);
+        let (lo, hi) = self.block_cells(b);
+        let tiles = super::block::tile_counts([0, 1, 2].map(|k| hi[k] - lo[k] + 1));
+        let l = g.map(|x| x % per);
+        (b, l[0] + tiles[0] * (l[1] + tiles[1] * l[2]))
+    }
+
     /// Closed box of block `b` (its corner positions, as computed for the samples).
     pub(crate) fn block_box(&self, b: usize) -> Aabb {
         let (lo, hi) = self.block_cells(b);

@@ -13,6 +13,15 @@ pub trait ScalarField: Sync {
     fn value(&self, p: &Point3) -> f64;
     /// `∇f(p)` (points outwards on the surface).
     fn gradient(&self, p: &Point3) -> Point3;
+    /// Gradients at `points`, all inside `region`: `out[i] = gradient(points[i])` (up to rounding).
+    /// Fields backed by a spatial index override this like [`ScalarField::values_in`].
+    /// `out.len() == points.len()`.
+    fn gradients_in(&self, region: &Aabb, points: &[Point3], out: &mut [Point3]) {
+        let _ = region;
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o = self.gradient(p);
+        }
+    }
     /// Values at `points`, all inside `region`: `out[i] = value(points[i])`. Fields backed by a
     /// spatial index override this to gather their candidates once per region. `out.len() == points.len()`.
     fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
@@ -21,8 +30,11 @@ pub trait ScalarField: Sync {
             *o = self.value(p);
         }
     }
-    /// Conservative test: returns `false` only when the zero set certainly does not meet `cell`
-    /// (so the polygonizer may skip it). Returning `true` always is correct but slow.
+    /// Skip test: `false` when the zero set is not expected to meet `cell`, so the polygonizer need
+    /// not sample it. Returning `true` always is correct but slow. The polygonizer does not trust a
+    /// `false` blindly: a skipped tile that the zero set enters from a sampled neighbour is sampled
+    /// after all (see [`polygonize_in`]), so a wrong `false` can only lose pieces of the zero set
+    /// that lie entirely in skipped tiles.
     fn may_contain_zero(&self, cell: &Aabb) -> bool;
 }
 
@@ -54,6 +66,7 @@ mod grid;
 mod kuhn;
 pub mod marching_squares;
 mod params;
+mod refine;
 
 pub use band::DataBand;
 pub use extract::{polygonize, polygonize_in};

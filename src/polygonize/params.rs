@@ -33,9 +33,10 @@ pub struct PolygonizeStats {
     pub cells_total: u64,
     /// Blocks the grid was split into.
     pub blocks_total: usize,
-    /// Blocks for which the field said the zero set may pass (the sparse narrow band).
+    /// Blocks sampled: those for which the field said the zero set may pass (the sparse narrow
+    /// band), plus those the zero set was followed into from a sampled neighbour.
     pub blocks_active: usize,
-    /// Calls of [`super::ScalarField::value`] (grid corners of active blocks plus refinement steps).
+    /// Field values evaluated (grid corners of the sampled tiles plus refinement steps; the normals' gradients are not counted).
     pub field_evaluations: u64,
 }
 

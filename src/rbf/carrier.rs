@@ -562,6 +562,17 @@ impl LocalCarrier {
 
     /// `(g(x), ∇g(x))` given `candidates`, a superset of the points within `R` of `x`.
     pub fn value_gradient_with(&self, x: &Point3, candidates: &[u32]) -> (f64, Point3) {
+        self.evaluate::<true>(x, candidates)
+    }
+
+    /// `g(x)` given `candidates` (as [`LocalCarrier::value_gradient_with`], without the gradient's
+    /// work; the same value, bit for bit).
+    pub fn value_with(&self, x: &Point3, candidates: &[u32]) -> f64 {
+        self.evaluate::<false>(x, candidates).0
+    }
+
+    /// `g(x)` and, when `GRAD`, `∇g(x)` (else the zero vector).
+    fn evaluate<const GRAD: bool>(&self, x: &Point3, candidates: &[u32]) -> (f64, Point3) {
         let r2 = self.radius * self.radius;
         let (mut within, mut nearest) = (0, (f64::INFINITY, 0usize));
         for &j in candidates {
@@ -578,7 +589,7 @@ impl LocalCarrier {
             }
         }
         let (local, d1, nearest) = if within >= FAR_NEIGHBOURS {
-            let local = self.blend(x, candidates, self.radius, None);
+            let local = self.blend::<GRAD>(x, candidates, self.radius, None);
             (local, nearest.0.sqrt(), nearest.1)
         } else {
             // Fewer than K usable points within R: widen the weights to the K nearest ones.
@@ -593,17 +604,17 @@ impl LocalCarrier {
                 .collect();
             let local = if rho <= self.radius {
                 // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
-                self.blend(x, &ids, self.radius, None)
+                self.blend::<GRAD>(x, &ids, self.radius, None)
             } else {
                 let far = self.points[self.valid_ids[kth as usize] as usize];
                 let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
-                self.blend(x, &ids, rho, Some(grad_rho))
+                self.blend::<GRAD>(x, &ids, rho, Some(grad_rho))
             };
             (local, knn[0].1, ids[0] as usize)
         };
         match &self.winding {
             Some(w) if d1 > FAR_FROM * self.radius && self.far_field.load(Ordering::Relaxed) => {
-                self.with_far_field(x, local, w, d1, self.points[nearest])
+                self.with_far_field::<GRAD>(x, local, w, d1, self.points[nearest])
             }
             _ => local,
         }
@@ -620,7 +631,7 @@ impl LocalCarrier {
         let rho = knn
             .last()
             .map_or(self.radius, |&(_, d)| d.max(self.radius) * 1.0001);
-        self.blend(x, &ids, rho, None).0
+        self.blend::<true>(x, &ids, rho, None).0
     }
 
     /// Blend the local value with the winding far field `d₁ (1 − 2w)` (about ±d₁ outside / inside):
@@ -630,7 +641,7 @@ impl LocalCarrier {
     /// (`|1 − 2w| ≤ 0.2`: beside an open sheet, across a wide hole), where the tangent planes keep
     /// deciding as before. The data points themselves (`d₁ = 0`) see only the planes, so the
     /// offsets and the spline do not change.
-    fn with_far_field(
+    fn with_far_field<const GRAD: bool>(
         &self,
         x: &Point3,
         (gl, dl): (f64, Point3),
@@ -650,6 +661,9 @@ impl LocalCarrier {
         let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
         let tau = s1 * c;
         let g = (1.0 - tau) * gl + tau * gf;
+        if !GRAD {
+            return (g, [0.0; 3]);
+        }
         let grad = [0, 1, 2].map(|k| {
             let dtau = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
             let dgf = -2.0 * d1 * wg[k] + a * dd1[k];
@@ -660,7 +674,14 @@ impl LocalCarrier {
 
     /// `g = Σ w_j n_j·(x − p_j) / Σ w_j` and its gradient over the points `ids` with
     /// `w_j = ψ(|x − p_j| / ρ)`; `grad_rho` is `∇ρ` when the radius depends on `x` (`None`: fixed).
-    fn blend(&self, x: &Point3, ids: &[u32], rho: f64, grad_rho: Option<Point3>) -> (f64, Point3) {
+    /// Without `GRAD` only `g` (the gradient comes back zero).
+    fn blend<const GRAD: bool>(
+        &self,
+        x: &Point3,
+        ids: &[u32],
+        rho: f64,
+        grad_rho: Option<Point3>,
+    ) -> (f64, Point3) {
         let (r2, inv_r) = (rho * rho, 1.0 / rho);
         let (mut sw, mut swd) = (0.0, 0.0);
         let (mut sg, mut sdw) = ([0.0; 3], [0.0; 3]);
@@ -674,6 +695,12 @@ impl LocalCarrier {
             }
             let t = d2.sqrt() * inv_r;
             let w = Kernel::WendlandC2.value(t);
+            let dist = dot(n, diff);
+            sw += w;
+            swd += w * dist;
+            if !GRAD {
+                continue;
+            }
             let dw_over = Kernel::WendlandC2.derivative_over_r(t) * inv_r * inv_r;
             // ∇ψ(|x − p|/ρ) = ψ'(t)/t · [(x − p)/ρ² − |x − p|²/ρ³ ∇ρ]
             let mut dw = [dw_over * diff[0], dw_over * diff[1], dw_over * diff[2]];
@@ -682,9 +709,6 @@ impl LocalCarrier {
                     dw[k] -= dw_over * d2 * inv_r * gr[k];
                 }
             }
-            let dist = dot(n, diff);
-            sw += w;
-            swd += w * dist;
             for k in 0..3 {
                 sg[k] += w * n[k] + dw[k] * dist;
                 sdw[k] += dw[k];
@@ -694,6 +718,9 @@ impl LocalCarrier {
             return self.nearest_plane(x);
         }
         let g = swd / sw;
+        if !GRAD {
+            return (g, [0.0; 3]);
+        }
         (
             g,
             [

@@ -49,9 +49,19 @@ impl SplineLevel {
     /// Gradient of this level's spline at `x`, added to `g`.
     fn add_gradient(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>, g: &mut Point3) {
         self.index.within(x, self.support, hits);
+        self.add_gradient_with(kernel, x, hits, g);
+    }
+
+    /// Gradient of this level's spline at `x` over `candidates` (a superset of the centres within
+    /// `R` of `x`), added to `g`.
+    fn add_gradient_with(&self, kernel: Kernel, x: &Point3, candidates: &[u32], g: &mut Point3) {
+        let r2 = self.support * self.support;
         let inv_r = 1.0 / self.support;
-        for &i in hits.iter() {
+        for &i in candidates {
             let c = self.centres[i as usize];
+            if dist2(*x, c) >= r2 {
+                continue;
+            }
             let r = dist2(*x, c).sqrt() * inv_r;
             let s = self.weights[i as usize] * kernel.derivative_over_r(r) * inv_r * inv_r;
             let d = sub(*x, c);
@@ -99,6 +109,9 @@ impl Spline {
         }
         for l in &self.levels {
             l.index.within(&c, half + l.support, &mut hits);
+            // Ascending order: every point then sums its centres in the same order whatever the
+            // region (bit-identical values at a corner shared by two tiles or blocks).
+            hits.sort_unstable();
             for (p, o) in points.iter().zip(out.iter_mut()) {
                 *o += l.value_with(kernel, p, &hits);
             }
@@ -151,7 +164,7 @@ pub struct RbfField {
 impl RbfField {
     fn carrier_value(&self, x: &Point3, candidates: &[u32]) -> f64 {
         match &self.carrier {
-            Carrier::Local(l) => l.value_gradient_with(x, candidates).0,
+            Carrier::Local(l) => l.value_with(x, candidates),
             c => c.value(x),
         }
     }
@@ -222,8 +235,38 @@ impl ScalarField for RbfField {
         let (c, half) = (region.center(), 0.5 * region.diagonal());
         self.carrier_index
             .within(&c, half + self.carrier_radius, &mut hits);
+        hits.sort_unstable();
         for (p, o) in points.iter().zip(out.iter_mut()) {
             *o += self.carrier_value(p, &hits);
+        }
+    }
+
+    fn gradients_in(&self, region: &Aabb, points: &[Point3], out: &mut [Point3]) {
+        let Correction::Global(spline) = &self.correction else {
+            for (p, o) in points.iter().zip(out.iter_mut()) {
+                *o = self.gradient(p);
+            }
+            return;
+        };
+        let (c, half) = (region.center(), 0.5 * region.diagonal());
+        let mut hits = Vec::with_capacity(256);
+        self.carrier_index
+            .within(&c, half + self.carrier_radius, &mut hits);
+        hits.sort_unstable();
+        let poly = spline.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            let g = match &self.carrier {
+                Carrier::Local(l) => l.value_gradient_with(p, &hits).1,
+                carrier => carrier.gradient(p),
+            };
+            *o = [0, 1, 2].map(|k| g[k] + poly[k]);
+        }
+        for l in &spline.levels {
+            l.index.within(&c, half + l.support, &mut hits);
+            hits.sort_unstable();
+            for (p, o) in points.iter().zip(out.iter_mut()) {
+                l.add_gradient_with(self.kernel, p, &hits, o);
+            }
         }
     }
 
@@ -244,6 +287,10 @@ impl ScalarField for RbfField {
         g
     }
 
+    /// The polygonizer follows the zero set into skipped tiles from sampled ones, so a wrong
+    /// answer can only lose a piece lying wholly in skipped cells, all farther than the finest
+    /// support radius from the data (see [`crate::polygonize::polygonize_in`]).
+    ///
     /// Active when a data point's support reaches the cell; elsewhere the field is the carrier
     /// and the coarser levels, decided by a Lipschitz bound for a single-level global field with an
     /// analytic carrier, else by sign changes or a value below the cell's half diagonal at the 8

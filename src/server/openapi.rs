@@ -80,6 +80,9 @@ pub fn parameter_schema(name: &str) -> Option<serde_json::Value> {
     if name == "blocks" {
         return Some(json!({"type": "string", "pattern": crate::params::BLOCKS_PATTERN}));
     }
+    if name == "chord-error" {
+        return Some(json!({"type": "string", "pattern": crate::params::CHORD_ERROR_PATTERN}));
+    }
     if let Some((_, values)) = crate::params::choices()
         .into_iter()
         .find(|(n, _)| *n == name)

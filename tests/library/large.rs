@@ -13,9 +13,11 @@ use rbfsurf::rbf::Blocks;
 use rbfsurf::reconstruct;
 
 fn params(blocks: Blocks, levels: usize) -> ReconParams {
+    // Every grid triangle, so two fits of the same field can be compared mesh to mesh.
     ReconParams {
         blocks,
         levels,
+        chord_error: rbfsurf::params::ChordTolerance::Off,
         ..Default::default()
     }
 }

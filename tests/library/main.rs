@@ -14,3 +14,4 @@ mod run;
 mod scanner_files;
 mod scanners;
 mod scanners_independent;
+mod skip_test;

@@ -1,0 +1,108 @@
+//! The polygonizer's skip test on real fitted fields (issue 14, item 4): extracting the zero set of a
+//! field fitted to a real scan with the narrow band (blocks and tiles skipped by
+//! `may_contain_zero`) gives exactly the mesh of extracting it everywhere, vertex for vertex, for the
+//! default local carrier (with its winding-number far field), for several levels and for a
+//! partition of unity of blocks, with normals and without.
+
+use crate::common;
+
+use rbfsurf::geometry::{Aabb, Point3, PointCloud};
+use rbfsurf::params::ReconParams;
+use rbfsurf::pipeline::{FittedField, fit_field};
+use rbfsurf::polygonize::{PolygonizeParams, ScalarField, polygonize};
+use rbfsurf::progress::NoProgress;
+use rbfsurf::rbf::Blocks;
+use rbfsurf::report::Timings;
+
+/// The same field without any skipping.
+struct Everywhere<'a>(&'a dyn ScalarField);
+
+impl ScalarField for Everywhere<'_> {
+    fn value(&self, p: &Point3) -> f64 {
+        self.0.value(p)
+    }
+    fn gradient(&self, p: &Point3) -> Point3 {
+        self.0.gradient(p)
+    }
+    fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        self.0.values_in(region, points, out);
+    }
+    fn gradients_in(&self, region: &Aabb, points: &[Point3], out: &mut [Point3]) {
+        self.0.gradients_in(region, points, out);
+    }
+    fn may_contain_zero(&self, _cell: &Aabb) -> bool {
+        true
+    }
+}
+
+fn fit(cloud: &PointCloud, params: &ReconParams) -> FittedField {
+    fit_field(cloud, params, &NoProgress, &mut Timings::default()).unwrap()
+}
+
+/// Polygonizes `fit` with and without skipping on the pipeline's box (points plus support radius
+/// plus three cells) and asserts the two meshes are identical; returns the share of the field
+/// evaluations that skipping saved.
+fn assert_skipping_changes_nothing(name: &str, fit: &FittedField, resolution: usize) -> f64 {
+    let b = Aabb::from_points(&fit.points);
+    let longest = b.extent().iter().fold(0.0f64, |a, &x| a.max(x));
+    let domain = b.inflated(fit.support_radius + 3.0 * longest / resolution as f64);
+    let pp = PolygonizeParams {
+        resolution,
+        ..Default::default()
+    };
+    let field = fit.field.as_ref();
+    let (skipped, s) = polygonize(field, &domain, &pp, &NoProgress).unwrap();
+    let (full, f) = polygonize(&Everywhere(field), &domain, &pp, &NoProgress).unwrap();
+    assert_eq!(f.blocks_active, f.blocks_total, "{name}");
+    assert!(
+        s.field_evaluations < f.field_evaluations,
+        "{name}: nothing was skipped ({s:?} vs {f:?})"
+    );
+    assert!(!full.triangles.is_empty(), "{name}");
+    assert_eq!(
+        skipped.vertices.len(),
+        full.vertices.len(),
+        "{name}: {s:?} vs {f:?}"
+    );
+    assert!(skipped == full, "{name}: the narrow band changed the mesh");
+    1.0 - s.field_evaluations as f64 / f.field_evaluations as f64
+}
+
+#[test]
+fn skipping_changes_nothing_on_fields_fitted_to_real_scans() {
+    let kitten =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
+    let bare = PointCloud {
+        normals: None,
+        ..kitten.clone()
+    };
+    let cases = [
+        ("kitten, local carrier", &kitten, ReconParams::default()),
+        (
+            "kitten, 3 levels",
+            &kitten,
+            ReconParams {
+                levels: 3,
+                ..Default::default()
+            },
+        ),
+        (
+            "kitten, 4 blocks of 2 levels",
+            &kitten,
+            ReconParams {
+                levels: 2,
+                blocks: Blocks::MaxPoints(1500),
+                ..Default::default()
+            },
+        ),
+        ("kitten without normals", &bare, ReconParams::default()),
+    ];
+    for (name, cloud, params) in cases {
+        let fit = fit(cloud, &params);
+        let share = assert_skipping_changes_nothing(name, &fit, 64);
+        assert!(
+            share > 0.2,
+            "{name}: skipping saved only {share} of the evaluations"
+        );
+    }
+}
