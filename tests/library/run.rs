@@ -12,7 +12,7 @@ use std::path::Path;
 fn output<'a>(mesh: &'a Path, report: &'a Path) -> RunOutput<'a> {
     RunOutput {
         mesh,
-        format: MeshFormat::Glb,
+        format: MeshFormat::Glb(Default::default()),
         report: Some(report),
         field: None,
         job_memory_mib: None,
