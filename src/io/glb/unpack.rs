@@ -186,7 +186,7 @@ fn decode_view(
     };
     match c.mode.as_str() {
         "ATTRIBUTES" => {
-            if c.stride == 0 || c.stride % 4 != 0 || c.stride > 256 {
+            if c.stride == 0 || !c.stride.is_multiple_of(4) || c.stride > 256 {
                 return bad(format!(
                     "ATTRIBUTES byteStride {} (must be a multiple of 4, at most 256)",
                     c.stride
@@ -215,7 +215,7 @@ fn decode_view(
                 return bad(format!("filter {} on index data", c.filter));
             }
             let triangles = c.mode == "TRIANGLES";
-            if triangles && c.count % 3 != 0 {
+            if triangles && !c.count.is_multiple_of(3) {
                 return bad(format!(
                     "TRIANGLES count {} is not a multiple of 3",
                     c.count
