@@ -354,9 +354,11 @@ pub const LEVELS: Range = Range::int("levels", 1, 8);
 pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.0));
 /// `min-support`: [0, 0.5].
 pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5));
+/// `lods`: 0..=8 levels of detail beside a GLB.
+pub const LODS: Range = Range::int("lods", 0, 8);
 
 /// Every numeric parameter's range.
-pub const RANGES: [Range; 11] = [
+pub const RANGES: [Range; 12] = [
     SUPPORT,
     NEIGHBOURS,
     RESOLUTION,
@@ -368,6 +370,7 @@ pub const RANGES: [Range; 11] = [
     LEVELS,
     MIN_COMPONENT,
     MIN_SUPPORT,
+    LODS,
 ];
 
 /// The exact spellings each choice parameter accepts (the HTTP API accepts only these; the
@@ -398,6 +401,12 @@ pub fn choices() -> Vec<(&'static str, Vec<&'static str>)> {
         ("index", ["octree", "kdtree"].to_vec()),
         ("boundary", ["auto", "trim", "closed"].to_vec()),
         ("color", ["rgb", "intensity", "none"].to_vec()),
+        (
+            "glb-compression",
+            crate::io::GlbCompression::ALL
+                .map(crate::io::GlbCompression::name)
+                .to_vec(),
+        ),
     ]
 }
 
@@ -610,6 +619,25 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub chord_error: Option<ChordTolerance>,
+    /// GLB storage: meshopt (default: KHR_mesh_quantization + EXT_meshopt_compression, 16-bit positions dequantized by the node transform, about 4–5 bytes per triangle; read by three.js, Babylon.js, gltfpack and rbfsurf) or none (plain float glTF, 24 bytes per triangle, for tools without a meshopt decoder). An output option: the mesh itself does not change.
+    #[cfg_attr(feature = "cli", arg(long))]
+    #[serde(default, with = "from_str_opt")]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
+    pub glb_compression: Option<crate::io::GlbCompression>,
+    /// Also write N simplified levels of detail beside a .glb mesh (0..=8, default 0): OUT.lod1.glb … OUT.lodN.glb (the service: GET …/lods/{level}), each about a quarter of the previous level's triangles, simplification error at most k·0.2 % of the bbox diagonal (the measured error in each file's asset.extras.lod); the main file keeps the full mesh.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "N"))]
+    #[serde(default)]
+    pub lods: Option<usize>,
+}
+
+impl ReconOptions {
+    /// The GLB writer options these options ask for.
+    pub fn glb(&self) -> crate::io::GlbOptions {
+        crate::io::GlbOptions {
+            compression: self.glb_compression.unwrap_or_default(),
+            lods: self.lods.unwrap_or(0),
+        }
+    }
 }
 
 impl TryFrom<&ReconOptions> for ReconParams {
@@ -628,6 +656,15 @@ impl TryFrom<&ReconOptions> for ReconParams {
             (None, Some(k)) => Support::Neighbours(k),
             (None, None) => d.support,
         };
+        if let Some(n) = a.lods
+            && !LODS.contains(n as f64)
+        {
+            return Err(ParamError {
+                name: "lods",
+                value: n.to_string(),
+                expected: "an integer in 0..=8",
+            });
+        }
         let method = a.method.unwrap_or(d.method);
         if method != Method::Csrbf
             && let Some((name, value)) = a

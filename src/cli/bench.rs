@@ -8,7 +8,7 @@
 use super::outln;
 use crate::geometry::synthetic::{Shape, SplitMix64};
 use crate::geometry::{Aabb, Normalization, PointCloud};
-use crate::io::{MeshFormat, ReadLimits, read_point_cloud, write_mesh};
+use crate::io::{GlbCompression, GlbOptions, MeshFormat, ReadLimits, read_point_cloud, write_mesh};
 use crate::linalg::SolverKind;
 use crate::ordering::OrderingKind;
 use crate::params::ReconParams;
@@ -41,6 +41,9 @@ pub struct BenchArgs {
     /// Repetitions per case (the minimum time is reported).
     #[arg(long, default_value_t = 3)]
     pub repeat: usize,
+    /// GLB storage: meshopt (default: quantized + meshopt-compressed) or none (plain float glTF).
+    #[arg(long, default_value_t = GlbCompression::Meshopt)]
+    pub glb_compression: GlbCompression,
 }
 
 /// The benchmarks.
@@ -236,7 +239,8 @@ fn scaling(a: &BenchArgs) -> Result<()> {
             let tw = Instant::now();
             let out =
                 std::env::temp_dir().join(format!("rbfsurf-bench-{}.glb", std::process::id()));
-            write_mesh(&out, &rec.mesh, MeshFormat::Glb)?;
+            let glb = MeshFormat::Glb(GlbOptions::compressed(a.glb_compression));
+            write_mesh(&out, &rec.mesh, glb)?;
             let _ = std::fs::remove_file(&out);
             rec.report.timings_s.write = tw.elapsed().as_secs_f64();
             rec.report.timings_s.total = t.elapsed().as_secs_f64();

@@ -5,7 +5,9 @@ use super::progress::BarProgress;
 use crate::cli::outln;
 use crate::frep::expr::{Loader, build};
 use crate::frep::{Align, CsgParams, MorphParams, Solid, VoxelParams, format, parse};
-use crate::io::{MeshFormat, encode_animated_glb, write_atomic, write_mesh};
+use crate::io::{
+    GlbCompression, GlbOptions, MeshFormat, encode_animated_glb, write_atomic, write_mesh,
+};
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -45,6 +47,9 @@ pub struct CsgArgs {
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
+    /// GLB storage: meshopt (default: quantized + meshopt-compressed) or none (plain float glTF).
+    #[arg(long, default_value_t = GlbCompression::Meshopt)]
+    pub glb_compression: GlbCompression,
 }
 
 /// Arguments of `morph`.
@@ -75,6 +80,10 @@ pub struct MorphArgs {
     /// Seconds each frame shows in morph.glb.
     #[arg(long, default_value_t = 0.25)]
     pub seconds_per_frame: f32,
+    /// GLB storage of the frame_NNN.glb files: meshopt (default) or none (plain float glTF);
+    /// morph.glb (the animation) is always plain float glTF.
+    #[arg(long, default_value_t = GlbCompression::Meshopt)]
+    pub glb_compression: GlbCompression,
 }
 
 /// Arguments of `voxelize`.
@@ -109,7 +118,8 @@ pub fn run_field(a: &FieldArgs) -> Result<()> {
 /// `csg`.
 pub fn run_csg(a: &CsgArgs) -> Result<()> {
     let start = Instant::now();
-    let format = MeshFormat::from_path(&a.output)?;
+    let format =
+        MeshFormat::from_path(&a.output)?.with_glb(GlbOptions::compressed(a.glb_compression));
     for out in std::iter::once(&a.output).chain(a.report.as_ref()) {
         check_parent(out)?;
     }
@@ -220,7 +230,11 @@ pub fn run_morph(a: &MorphArgs) -> Result<()> {
     let mut write_all = || -> Result<()> {
         for (i, m) in frames.iter().enumerate() {
             let p = a.output.join(format!("frame_{i:03}.glb"));
-            write_mesh(&p, m, MeshFormat::Glb)?;
+            write_mesh(
+                &p,
+                m,
+                MeshFormat::Glb(GlbOptions::compressed(a.glb_compression)),
+            )?;
             written.push(p);
         }
         let p = a.output.join("morph.glb");

@@ -39,10 +39,15 @@ pub struct GenerateArgs {
     /// Translate every point by this amount along x, y and z (e.g. 1e6 to test far-from-origin data).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub offset: f64,
-    /// Also write the closed truth mesh (~400k triangles, offset applied) here: .ply/.glb are f32,
-    /// use .obj for full precision with large --offset.
+    /// Also write the closed truth mesh (~400k triangles, offset applied) here: .ply is f32, .glb
+    /// 16-bit quantized (error below 1.3e-5 of the longest bbox edge; f32 with
+    /// --glb-compression none), use .obj for full precision with large --offset.
     #[arg(long, value_name = "OUT_TRUTH")]
     pub truth: Option<PathBuf>,
+    /// GLB storage of a .glb truth mesh: meshopt (default: quantized + meshopt-compressed) or none
+    /// (plain float glTF).
+    #[arg(long, default_value_t = crate::io::GlbCompression::Meshopt)]
+    pub glb_compression: crate::io::GlbCompression,
     /// Output PLY (binary) file.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -61,7 +66,9 @@ pub fn run(a: &GenerateArgs) -> Result<()> {
     }
     let truth_format = match &a.truth {
         Some(p) => {
-            Some(MeshFormat::from_path(p).with_context(|| format!("--truth {}", p.display()))?)
+            let glb = crate::io::GlbOptions::compressed(a.glb_compression);
+            let f = MeshFormat::from_path(p).with_context(|| format!("--truth {}", p.display()))?;
+            Some(f.with_glb(glb))
         }
         None => None,
     };

@@ -36,7 +36,11 @@ pub struct ReconstructArgs {
 
 pub fn run(a: &ReconstructArgs) -> Result<()> {
     let params = ReconParams::try_from(&a.options)?;
-    let format = MeshFormat::from_path(&a.output)?;
+    let glb = a.options.glb();
+    let format = MeshFormat::from_path(&a.output)?.with_glb(glb);
+    if glb.lods > 0 && !matches!(format, MeshFormat::Glb(_)) {
+        anyhow::bail!("--lods needs a .glb output (got {})", a.output.display());
+    }
     let outputs = [Some(&a.output), a.report.as_ref(), a.save_field.as_ref()];
     for out in outputs.into_iter().flatten() {
         super::check_parent(out)?;
@@ -79,5 +83,16 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         report.residual.max,
         report.timings_s.total
     );
+    for k in 1..=glb.lods {
+        let p = crate::io::lod_path(&a.output, k);
+        let lod = crate::io::glb_asset_extra(&std::fs::read(&p)?, "lod").unwrap_or_default();
+        outln!(
+            "  {}: {} triangles, simplification error {:.2e} ({:.2e} of the bbox diagonal)",
+            p.display(),
+            lod["triangles"],
+            lod["error"].as_f64().unwrap_or(f64::NAN),
+            lod["error_rel"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
     Ok(())
 }

@@ -190,7 +190,7 @@ fn download(
     timeout: Duration,
 ) -> Result<()> {
     let ext = match fmt {
-        MeshFormat::Glb => "glb",
+        MeshFormat::Glb(_) => "glb",
         MeshFormat::Ply => "ply",
         MeshFormat::Obj => "obj",
     };

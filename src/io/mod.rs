@@ -32,9 +32,11 @@ use std::path::Path;
 
 pub use budget::{PointCountHint, peek_point_count, reader_peak_mib};
 pub use error::IoError;
-pub use glb::{decode_glb, encode_glb, encode_glb_with, glb_crs};
+pub use glb::{
+    GlbCompression, GlbOptions, decode_glb, encode_glb, encode_glb_with, glb_asset_extra, glb_crs,
+};
 pub use glb_anim::encode_animated_glb;
-pub use write::{write_atomic, write_mesh, write_mesh_with, write_points_ply};
+pub use write::{lod_path, write_atomic, write_mesh, write_mesh_with, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};
 
@@ -116,8 +118,9 @@ impl PointFormat {
 /// Mesh output formats of [`write_mesh`] (reading also accepts OFF, see [`read_mesh`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MeshFormat {
-    /// Binary glTF 2.0 (`.glb`): positions, normals, u32 indices.
-    Glb,
+    /// Binary glTF 2.0 (`.glb`): positions, normals, indices (compact by default, see
+    /// [`GlbOptions`]).
+    Glb(GlbOptions),
     /// Binary little-endian PLY (`.ply`).
     Ply,
     /// Wavefront OBJ text (`.obj`).
@@ -125,14 +128,15 @@ pub enum MeshFormat {
 }
 
 impl MeshFormat {
-    /// Output format from the extension of `path` (`.glb`, `.ply`, `.obj`, case-insensitive).
+    /// Output format from the extension of `path` (`.glb`, `.ply`, `.obj`, case-insensitive); GLB
+    /// with the default [`GlbOptions`].
     pub fn from_path(path: &Path) -> Result<MeshFormat, IoError> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         match ext.as_deref() {
-            Some("glb") => Ok(MeshFormat::Glb),
+            Some("glb") => Ok(MeshFormat::Glb(GlbOptions::default())),
             Some("ply") => Ok(MeshFormat::Ply),
             Some("obj") => Ok(MeshFormat::Obj),
             other => Err(IoError::UnknownFormat {
@@ -142,6 +146,14 @@ impl MeshFormat {
                     other.unwrap_or("")
                 ),
             }),
+        }
+    }
+
+    /// `self` with these GLB options when it is GLB (other formats unchanged).
+    pub fn with_glb(self, options: GlbOptions) -> MeshFormat {
+        match self {
+            MeshFormat::Glb(_) => MeshFormat::Glb(options),
+            other => other,
         }
     }
 }
@@ -464,7 +476,7 @@ mod tests {
         assert_eq!(PointFormat::sniff(&[0u8, 1, 2, 200, 7]), None);
         assert_eq!(
             MeshFormat::from_path(Path::new("m.GLB")).unwrap(),
-            MeshFormat::Glb
+            MeshFormat::Glb(GlbOptions::default())
         );
         assert!(matches!(
             MeshFormat::from_path(Path::new("m.stl")),

@@ -15,50 +15,57 @@ use crate::geometry::TriMesh;
 /// indices. Borrowed unchanged when no two vertices round to the same position. Non-finite f32
 /// coordinates are left for the caller's checks (they are never merged).
 pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
-    let key = |p: &[f64; 3]| p.map(|c| (c as f32).to_bits());
-    let mut first: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.vertices.len());
-    let mut to: Vec<u32> = Vec::with_capacity(mesh.vertices.len());
-    let mut kept = 0u32;
-    for p in &mesh.vertices {
-        let finite = p.iter().all(|c| (*c as f32).is_finite());
-        let id = if finite {
-            *first.entry(key(p)).or_insert_with(|| {
-                kept += 1;
-                kept - 1
-            })
-        } else {
-            kept += 1;
-            kept - 1
+    let keys: Vec<Option<[u32; 3]>> = (mesh.vertices.iter())
+        .map(|p| {
+            let f = p.map(|c| c as f32);
+            f.iter().all(|c| c.is_finite()).then(|| f.map(f32::to_bits))
+        })
+        .collect();
+    let snap = |v: usize| mesh.vertices[v].map(|c| f64::from(c as f32));
+    match merge_equal_keys(mesh, &keys, snap) {
+        Some((merged, _)) => Cow::Owned(merged),
+        None => Cow::Borrowed(mesh),
+    }
+}
+
+/// The merge behind [`merge_f32_duplicates`] for any vertex key: vertices with equal `Some` keys are
+/// merged into the group's first vertex (placed at `snap(first)`, with its normal and colour); `None`
+/// keys are never merged. Triangles are remapped and those with a repeated corner dropped; vertices
+/// are renumbered in order of first occurrence. Returns the merged mesh and, for each new vertex,
+/// the index of the old vertex it stands for; `None` when no two keys are equal.
+pub(crate) fn merge_equal_keys<K: std::hash::Hash + Eq + Copy>(
+    mesh: &TriMesh,
+    keys: &[Option<K>],
+    snap: impl Fn(usize) -> [f64; 3],
+) -> Option<(TriMesh, Vec<usize>)> {
+    let mut first: HashMap<K, u32> = HashMap::with_capacity(keys.len());
+    let mut to: Vec<u32> = Vec::with_capacity(keys.len());
+    let mut source: Vec<usize> = Vec::with_capacity(keys.len());
+    for (v, key) in keys.iter().enumerate() {
+        let fresh = source.len() as u32;
+        let id = match key {
+            Some(k) => *first.entry(*k).or_insert(fresh),
+            None => fresh,
         };
+        if id == fresh {
+            source.push(v);
+        }
         to.push(id);
     }
-    if kept as usize == mesh.vertices.len() {
-        return Cow::Borrowed(mesh);
+    if source.len() == keys.len() {
+        return None;
     }
-    let mut vertices = vec![[0.0; 3]; kept as usize];
-    let mut normals = vec![
-        [0.0; 3];
-        if mesh.normals.is_empty() {
-            0
-        } else {
-            kept as usize
-        }
-    ];
+    let has_normals = mesh.normals.len() == mesh.vertices.len();
     let has_colors = mesh.colors.len() == mesh.vertices.len();
-    let mut colors = vec![[0.0f32; 3]; if has_colors { kept as usize } else { 0 }];
-    let mut seen = vec![false; kept as usize];
-    for (v, &id) in to.iter().enumerate() {
-        if !seen[id as usize] {
-            seen[id as usize] = true;
-            vertices[id as usize] = mesh.vertices[v].map(|c| f64::from(c as f32));
-            if let Some(n) = mesh.normals.get(v).filter(|_| !normals.is_empty()) {
-                normals[id as usize] = *n;
-            }
-            if has_colors {
-                colors[id as usize] = mesh.colors[v];
-            }
-        }
-    }
+    let vertices = source.iter().map(|&v| snap(v)).collect();
+    let normals = match has_normals {
+        true => source.iter().map(|&v| mesh.normals[v]).collect(),
+        false => Vec::new(),
+    };
+    let colors = match has_colors {
+        true => source.iter().map(|&v| mesh.colors[v]).collect(),
+        false => Vec::new(),
+    };
     let triangles = mesh
         .triangles
         .iter()
@@ -67,12 +74,13 @@ pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
             (m[0] != m[1] && m[1] != m[2] && m[0] != m[2]).then_some(m)
         })
         .collect();
-    Cow::Owned(TriMesh {
+    let merged = TriMesh {
         vertices,
         normals,
         triangles,
         colors,
-    })
+    };
+    Some((merged, source))
 }
 
 #[cfg(test)]
@@ -113,7 +121,7 @@ mod tests {
         assert_eq!(t.degenerate_triangles, 0);
         assert!(t.watertight && t.manifold && t.oriented, "{t:?}");
         assert_eq!(merged.triangles.len(), 6);
-        // Written as GLB and read back, then welded by position: no degenerate triangle. Far from
+        // Written as plain GLB and read back, then welded by position: no degenerate triangle. Far from
         // the origin the positions are stored relative to a node translation, so the two apexes
         // stay distinct (8 triangles, back at their place); near the origin they are merged (6).
         for (shift, triangles) in [(0.0, 6), (b, 8)] {
@@ -121,7 +129,9 @@ mod tests {
             for p in &mut m.vertices {
                 *p = p.map(|c| c - b + shift);
             }
-            let back = crate::io::decode_glb(&crate::io::encode_glb(&m).unwrap()).unwrap();
+            let plain = crate::io::GlbCompression::None;
+            let glb = crate::io::encode_glb_with(&m, &Default::default(), plain).unwrap();
+            let back = crate::io::decode_glb(&glb).unwrap();
             let mut ids: HashMap<[u64; 3], u32> = HashMap::new();
             let weld: Vec<u32> = (back.vertices.iter())
                 .map(|p| {

@@ -77,11 +77,62 @@ pub fn write_mesh_with(
     meta: &MeshMeta,
 ) -> Result<(), IoError> {
     let bytes = match format {
-        MeshFormat::Glb => encode_glb_with(mesh, meta)?,
+        MeshFormat::Glb(o) => encode_glb_with(mesh, meta, o.compression)?,
         MeshFormat::Ply => encode_ply(mesh, meta)?,
         MeshFormat::Obj => encode_obj(mesh, meta)?,
     };
-    write_atomic(path, &bytes)
+    write_atomic(path, &bytes)?;
+    match format {
+        MeshFormat::Glb(o) if o.lods > 0 => write_lods(path, mesh, meta, o).inspect_err(|_| {
+            let _ = std::fs::remove_file(path);
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// `NAME.lodK.glb` next to `path` (`NAME.glb`), for K = 1, 2, …
+pub fn lod_path(path: &Path, k: usize) -> std::path::PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(Default::default, |s| s.to_string_lossy().into_owned());
+    path.with_file_name(format!("{stem}.lod{k}.glb"))
+}
+
+/// Writes `o.lods` simplified levels of `mesh` next to `path` ([`lod_path`]), each GLB recording
+/// its level, triangle count and simplification error in `asset.extras.lod`. On failure the
+/// levels already written are removed.
+fn write_lods(
+    path: &Path,
+    mesh: &TriMesh,
+    meta: &MeshMeta,
+    o: super::GlbOptions,
+) -> Result<(), IoError> {
+    let mut written = Vec::new();
+    let result = (|| {
+        for (k, lod) in crate::mesh::lod::simplify_levels(mesh, o.lods)
+            .iter()
+            .enumerate()
+        {
+            let info = serde_json::json!({
+                "level": k + 1,
+                "triangles": lod.mesh.triangles.len(),
+                "error": lod.error,
+                "error_rel": lod.error_rel,
+            });
+            let bytes = encode_glb_with(&lod.mesh, meta, o.compression)?;
+            let bytes = super::glb::with_asset_extra(&bytes, "lod", info)?;
+            let p = lod_path(path, k + 1);
+            write_atomic(&p, &bytes)?;
+            written.push(p);
+        }
+        Ok(())
+    })();
+    if result.is_err() {
+        for p in &written {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+    result
 }
 
 /// `crs` on one line (WKT may span lines), for a comment.
@@ -212,7 +263,9 @@ pub(crate) fn encode_obj(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoE
 mod tests {
     use super::*;
     use crate::io::glb::tests::octahedron;
-    use crate::io::read_mesh;
+    use crate::io::{GlbCompression, GlbOptions, read_mesh};
+
+    const PLAIN_GLB: MeshFormat = MeshFormat::Glb(GlbOptions::compressed(GlbCompression::None));
 
     fn leftovers(dir: &Path) -> Vec<String> {
         std::fs::read_dir(dir)
@@ -227,7 +280,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let m = octahedron();
         for (name, fmt) in [
-            ("m.glb", MeshFormat::Glb),
+            ("m.glb", PLAIN_GLB),
             ("m.ply", MeshFormat::Ply),
             ("m.obj", MeshFormat::Obj),
         ] {
@@ -238,7 +291,8 @@ mod tests {
                 }
                 let p = dir.path().join(name);
                 write_mesh(&p, &src, fmt).unwrap();
-                assert_eq!(MeshFormat::from_path(&p).unwrap(), fmt);
+                let default = fmt.with_glb(GlbOptions::default());
+                assert_eq!(MeshFormat::from_path(&p).unwrap(), default);
                 let back = read_mesh(&p).unwrap();
                 assert_eq!(back.triangles, src.triangles, "{name}");
                 for (a, b) in back.vertices.iter().zip(&src.vertices) {
@@ -264,7 +318,7 @@ mod tests {
     fn missing_directory_leaves_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("no/such/dir/out.glb");
-        let e = write_mesh(&p, &octahedron(), MeshFormat::Glb).unwrap_err();
+        let e = write_mesh(&p, &octahedron(), PLAIN_GLB).unwrap_err();
         assert!(matches!(e, IoError::Write { .. }), "{e}");
         assert!(e.to_string().contains("out.glb"), "{e}");
         assert!(!p.exists());
@@ -278,7 +332,8 @@ mod tests {
         std::fs::write(&p, b"old").unwrap();
         let mut bad = octahedron();
         bad.triangles[0] = [0, 1, 99];
-        for fmt in [MeshFormat::Glb, MeshFormat::Ply, MeshFormat::Obj] {
+        let compact = MeshFormat::Glb(GlbOptions::default());
+        for fmt in [compact, PLAIN_GLB, MeshFormat::Ply, MeshFormat::Obj] {
             assert!(matches!(
                 write_mesh(&p, &bad, fmt),
                 Err(IoError::Encode { .. })

@@ -4,6 +4,7 @@
 //! - [`topology`]: components, watertightness, manifoldness, orientation, Euler characteristic and genus.
 //! - [`optimize`]: vertex-cache and vertex-fetch reordering with meshoptimizer.
 //! - [`compare`]: Chamfer / Hausdorff distances to a reference mesh or point set.
+//! - [`lod`]: error-bounded simplified levels of detail (meshoptimizer).
 //! - [`trim`], [`border`], [`floaters`]: open-scan trimming, manifold borders, floater removal by
 //!   data support.
 
@@ -12,6 +13,7 @@ pub mod color;
 pub mod compare;
 mod distance;
 pub mod floaters;
+pub mod lod;
 pub mod optimize;
 pub mod simplify;
 #[cfg(test)]

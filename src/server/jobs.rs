@@ -499,7 +499,7 @@ impl JobManager {
         let field = self.store.file(job.id, "fitted.field");
         let output = RunOutput {
             mesh: &mesh,
-            format: MeshFormat::Glb,
+            format: MeshFormat::Glb(options.glb()),
             report: Some(&report),
             field: (params.method == crate::params::Method::Csrbf).then_some(field.as_path()),
             job_memory_mib: Some(job_mib),

@@ -36,6 +36,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(rec::get_job, rec::delete_job))
         .routes(routes!(rec::job_events))
         .routes(routes!(rec::mesh_glb))
+        .routes(routes!(rec::mesh_lod))
         .routes(routes!(rec::mesh_ply))
         .routes(routes!(rec::mesh_obj))
         .routes(routes!(rec::job_report))
@@ -46,6 +47,8 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .routes(routes!(meta::openapi_json))
         .routes(routes!(meta::index))
         .routes(routes!(meta::viewer_js))
+        .routes(routes!(meta::meshopt_decoder_js))
+        .routes(routes!(meta::meshopt_license))
 }
 
 /// The OpenAPI document: the handlers' annotations plus the parameter constraints

@@ -186,7 +186,8 @@ pub fn run_volume_job(
             };
             let (mesh, report) =
                 crate::frep::mesh_solid(&s, &c.expression, &params, progress).map_err(failed)?;
-            write_mesh(&mesh_path, &mesh, MeshFormat::Glb).map_err(|e| internal(e.to_string()))?;
+            write_mesh(&mesh_path, &mesh, MeshFormat::Glb(Default::default()))
+                .map_err(|e| internal(e.to_string()))?;
             (mesh.triangles.len(), serde_json::to_vec_pretty(&report))
         }
         VolumeRequest::Morph(m) => {

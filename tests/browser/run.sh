@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Browser test of the viewer page: starts `rbfsurf serve`, drops data/kitten.ply on the page in
-# headless Chromium, waits for "loaded N triangles", screenshots the canvas (tests/browser/out/)
-# and checks that it shows the mesh. On a developer machine it skips (exit 0) when node or
+# headless Chromium (with 2 levels of detail), waits for "loaded N triangles", checks that the
+# served GLB is compact (meshopt, decoded in the page) and holds N triangles, screenshots the
+# canvas (tests/browser/out/) and checks that it shows the mesh. On a developer machine it skips (exit 0) when node or
 # Chromium is not installed; under CI (CI=true) it installs them (apt-get, as root) or fails.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"

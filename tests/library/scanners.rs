@@ -11,8 +11,8 @@ use crate::scanner_files::{E57Coords, LasSpec, Scan, color_field, e57_bytes, las
 use rbfsurf::geometry::synthetic::{Shape, SplitMix64};
 use rbfsurf::geometry::{Point3, PointCloud};
 use rbfsurf::io::{
-    IoError, MeshFormat, PointFormat, ReadLimits, parse_point_cloud, peek_point_count,
-    read_point_cloud,
+    GlbCompression, GlbOptions, IoError, MeshFormat, PointFormat, ReadLimits, parse_point_cloud,
+    peek_point_count, read_point_cloud,
 };
 use rbfsurf::params::ReconParams;
 use rbfsurf::pipeline::{PointSource, RunOutput, run};
@@ -178,8 +178,11 @@ fn run_to(input: &Path, dir: &Path, name: &str, format: MeshFormat) -> rbfsurf::
     .report
 }
 
-/// Vertex positions (f64: node translation + f32 position) and COLOR_0 (linear → sRGB) of a GLB,
-/// read with the `gltf` crate, independently of rbfsurf's decoder.
+/// Plain float GLB, which the `gltf` crate reads (it has no meshopt decoder).
+const PLAIN_GLB: MeshFormat = MeshFormat::Glb(GlbOptions::compressed(GlbCompression::None));
+
+/// Vertex positions (f64: node translation + f32 position) and COLOR_0 (linear → sRGB) of a plain
+/// GLB, read with the `gltf` crate, independently of rbfsurf's decoder.
 fn glb_with_gltf(path: &Path) -> (Vec<Point3>, Vec<[f32; 3]>, serde_json::Value) {
     let bytes = std::fs::read(path).unwrap();
     let g = gltf::Gltf::from_slice(&bytes).unwrap();
@@ -234,8 +237,13 @@ fn sorted(mut v: Vec<Point3>) -> Vec<Point3> {
 /// Largest distance from a vertex of either set to the nearest vertex of the other, `b` moved
 /// back by `shift` (a Hausdorff distance between the vertex sets; independent of their order).
 fn vertex_distance(a: &[Point3], b: &[Point3], shift: Point3) -> f64 {
-    use rbfsurf::spatial::{IndexKind, build_index};
     assert_eq!(a.len(), b.len());
+    vertex_hausdorff(a, b, shift)
+}
+
+/// [`vertex_distance`] for vertex sets of any sizes.
+fn vertex_hausdorff(a: &[Point3], b: &[Point3], shift: Point3) -> f64 {
+    use rbfsurf::spatial::{IndexKind, build_index};
     let back: Vec<Point3> = b
         .iter()
         .map(|q| [0, 1, 2].map(|k| q[k] - shift[k]))
@@ -280,7 +288,7 @@ fn las_laz_and_e57_of_one_scan_give_the_same_coloured_mesh() {
     );
     let mut meshes = Vec::new();
     for (name, input) in [("las", &las), ("laz", &laz), ("e57", &e57)] {
-        let report = run_to(input, dir.path(), &format!("{name}.glb"), MeshFormat::Glb);
+        let report = run_to(input, dir.path(), &format!("{name}.glb"), PLAIN_GLB);
         assert_eq!(report.attributes.color, "rgb", "{name}");
         assert_eq!(
             report.attributes.crs.as_deref(),
@@ -322,8 +330,8 @@ fn a_utm_shifted_cloud_gives_the_same_mesh_shifted_in_the_written_files() {
     let pb = read_point_cloud(&b, &ReadLimits::default()).unwrap();
     assert!(max_diff(&pa.points, &pb.points, shift) < 1e-9);
     // GLB: node translation + f32 positions relative to it, read with the gltf crate.
-    run_to(&a, dir.path(), "a.glb", MeshFormat::Glb);
-    run_to(&b, dir.path(), "b.glb", MeshFormat::Glb);
+    run_to(&a, dir.path(), "a.glb", PLAIN_GLB);
+    run_to(&b, dir.path(), "b.glb", PLAIN_GLB);
     let (ga, _, _) = glb_with_gltf(&dir.path().join("a.glb"));
     let (gb, _, json) = glb_with_gltf(&dir.path().join("b.glb"));
     assert!(json["nodes"][0]["translation"].is_array(), "{json}");
@@ -338,7 +346,20 @@ fn a_utm_shifted_cloud_gives_the_same_mesh_shifted_in_the_written_files() {
     assert!(head.contains("property double x") && !head.contains("comment crs"));
     assert!(head.contains("property uchar red"), "{head}");
     let d_ply = vertex_distance(&ma.vertices, &mb.vertices, shift);
-    eprintln!("shifted by {shift:?}: GLB max difference {d_glb:.2e} m, PLY {d_ply:.2e} m");
+    // Compact GLB: 16-bit grid over the 20 m object, dequantized by the node transform (the
+    // grid origin carries the offset): the object's precision, not the absolute coordinates'.
+    let compact = MeshFormat::Glb(GlbOptions::default());
+    run_to(&a, dir.path(), "ca.glb", compact);
+    run_to(&b, dir.path(), "cb.glb", compact);
+    let ca = rbfsurf::io::read_mesh(&dir.path().join("ca.glb")).unwrap();
+    let cb = rbfsurf::io::read_mesh(&dir.path().join("cb.glb")).unwrap();
+    let d_compact = vertex_hausdorff(&ca.vertices, &cb.vertices, shift);
+    let d_quant = vertex_hausdorff(&ma.vertices, &ca.vertices, [0.0; 3]);
+    eprintln!(
+        "shifted by {shift:?}: GLB max difference {d_glb:.2e} m, PLY {d_ply:.2e} m, compact GLB {d_compact:.2e} m (quantization {d_quant:.2e} m)"
+    );
+    // 20 m / 65535 = 3e-4 m steps: half a step per axis at most, in each file.
+    assert!(d_quant < 3e-4 && d_compact < 6e-4, "{d_quant} {d_compact}");
     // f32 at 4.1e6 m is 0.5 m coarse; relative to the local origin the 20 m object keeps ~1e-6.
     assert!(d_glb < 1e-5, "GLB: {d_glb}");
     assert!(d_ply < 1e-5, "PLY: {d_ply}");

@@ -40,9 +40,15 @@ async fn wait_returns_the_finished_job_and_every_download() {
     assert_eq!(glb.status, StatusCode::OK);
     assert_eq!(glb.headers["content-type"], "model/gltf-binary");
     let mesh = rbfsurf::io::decode_glb(&glb.body).unwrap();
-    assert_eq!(
+    // The compact GLB merges vertices on its 16-bit grid and drops the slivers between them
+    // (docs/formats.md: 0.08–0.14 % of the triangles on the shared scans).
+    let (file, job_tri) = (
         mesh.triangles.len() as u64,
-        job["triangles"].as_u64().unwrap()
+        job["triangles"].as_u64().unwrap(),
+    );
+    assert!(
+        file <= job_tri && job_tri - file <= job_tri / 200,
+        "{file} vs {job_tri}"
     );
     // Vertices lie near the sampled sphere (centre 0.5, radius 0.4), so the file is the real result.
     let sphere = rbfsurf::geometry::synthetic::Shape::by_name("sphere").unwrap();

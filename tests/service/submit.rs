@@ -62,9 +62,12 @@ async fn submit_exits_zero_only_on_success() {
     );
     let mesh = rbfsurf::io::read_mesh(&out).unwrap();
     let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
-    assert_eq!(
-        rep["mesh"]["triangles"].as_u64().unwrap() as usize,
-        mesh.triangles.len()
+    // The compact GLB drops the slivers its 16-bit grid merges (at most 0.5 %, docs/formats.md).
+    let reported = rep["mesh"]["triangles"].as_u64().unwrap() as usize;
+    let file = mesh.triangles.len();
+    assert!(
+        file <= reported && reported - file <= reported / 200,
+        "{file} vs {reported}"
     );
     let l = line.display().to_string();
     for (args, expect) in [

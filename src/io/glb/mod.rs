@@ -16,14 +16,81 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 
 mod decode;
+mod pack;
+mod unpack;
 
 pub(crate) use decode::decode_glb_named;
-pub use decode::{decode_glb, glb_crs};
+pub use decode::{decode_glb, glb_asset_extra, glb_crs};
 
 use super::{IoError, MeshMeta};
 use crate::geometry::{Point3, TriMesh, cross, normalized, sub};
 
 const GENERATOR: &str = "rbfsurf";
+
+/// How a `.glb` is stored.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum GlbCompression {
+    /// `KHR_mesh_quantization` + `EXT_meshopt_compression` (the default): 16-bit positions on a
+    /// grid over the bounding box (dequantized by the node transform), 8-bit normals, meshoptimizer's
+    /// vertex and index codecs. About 4–5 bytes per triangle; needs a loader with the meshopt
+    /// decoder (three.js, Babylon.js, gltfpack, rbfsurf).
+    #[default]
+    Meshopt,
+    /// Plain glTF: f32 positions and normals, u32 indices (24 bytes per triangle), for tools that
+    /// cannot decode meshopt.
+    None,
+}
+
+/// How a `.glb` is written ([`super::MeshFormat::Glb`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct GlbOptions {
+    /// Storage of the file (default [`GlbCompression::Meshopt`]).
+    pub compression: GlbCompression,
+    /// Simplified levels of detail written next to the file, `NAME.lod1.glb` … `NAME.lodN.glb`
+    /// (see [`crate::mesh::lod`]); default 0. The main file always holds the full mesh.
+    pub lods: usize,
+}
+
+impl GlbOptions {
+    /// `compression`, no levels of detail.
+    pub const fn compressed(compression: GlbCompression) -> GlbOptions {
+        GlbOptions {
+            compression,
+            lods: 0,
+        }
+    }
+}
+
+impl GlbCompression {
+    /// Every choice.
+    pub const ALL: [GlbCompression; 2] = [GlbCompression::Meshopt, GlbCompression::None];
+
+    /// Command-line / API name.
+    pub fn name(self) -> &'static str {
+        match self {
+            GlbCompression::Meshopt => "meshopt",
+            GlbCompression::None => "none",
+        }
+    }
+}
+
+impl std::str::FromStr for GlbCompression {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        (GlbCompression::ALL.into_iter())
+            .find(|c| c.name() == s)
+            .ok_or_else(|| format!("unknown GLB compression '{s}' (use meshopt or none)"))
+    }
+}
+
+impl std::fmt::Display for GlbCompression {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 fn enc_err(message: impl Into<String>) -> IoError {
     IoError::Encode {
@@ -158,14 +225,9 @@ pub(super) fn push_accessor(
     })
 }
 
-/// Encodes a mesh as GLB bytes (glTF 2.0 binary), then decodes the result and checks the vertex
-/// and index counts (an error, not a panic, if they differ).
-///
-/// Coordinates are converted from f64 to f32; vertices that round to the same f32 position are merged
-/// first and the triangles that then repeat a corner dropped (so no zero-area triangle appears when
-/// the file is read back and welded); normals are written unit length when `mesh.normals` is
-/// non-empty. Fails with [`IoError::Encode`] on an empty mesh, out-of-range
-/// indices or coordinates that are not finite in f32.
+/// Encodes a mesh as a compact GLB ([`GlbCompression::Meshopt`]), then decodes the result and
+/// checks the vertex and index counts (an error, not a panic, if they differ). See
+/// [`encode_glb_with`].
 ///
 /// ```
 /// use rbfsurf::geometry::TriMesh;
@@ -173,15 +235,55 @@ pub(super) fn push_accessor(
 ///                      normals: vec![], triangles: vec![[0, 1, 2]], colors: vec![] };
 /// let glb = rbfsurf::io::encode_glb(&mesh).unwrap();
 /// assert_eq!(&glb[..4], b"glTF");
-/// assert_eq!(rbfsurf::io::decode_glb(&glb).unwrap().triangles, mesh.triangles);
+/// let back = rbfsurf::io::decode_glb(&glb).unwrap();
+/// assert_eq!(back.triangles.len(), 1);
+/// assert_eq!(back.vertices.len(), 3);
 /// ```
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>, IoError> {
-    encode_glb_with(mesh, &MeshMeta::default())
+    encode_glb_with(mesh, &MeshMeta::default(), GlbCompression::Meshopt)
 }
 
-/// [`encode_glb`] with metadata: `meta.crs` goes to `asset.extras.crs`. Vertex colours (sRGB in
-/// [`TriMesh::colors`]) are written as `COLOR_0` in linear RGB, as glTF requires.
-pub fn encode_glb_with(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoError> {
+/// Encodes a mesh as GLB bytes (glTF 2.0 binary) stored as `compression` says, with metadata:
+/// `meta.crs` goes to `asset.extras.crs`. Vertex colours (sRGB in [`TriMesh::colors`]) are
+/// written as `COLOR_0` in linear RGB, as glTF requires. The result is decoded again and its
+/// vertex and triangle counts checked.
+///
+/// [`GlbCompression::Meshopt`]: positions on a 16-bit grid over the bounding box (error at most
+/// 1.3·10⁻⁵ of the longest bbox edge), the node transform dequantizes; vertices on one grid point are merged; vertex and triangle order are
+/// optimised (so indices differ from `mesh`'s). [`GlbCompression::None`]: coordinates converted
+/// from f64 to f32, vertices that round to the same f32 position merged first and the triangles
+/// that then repeat a corner dropped (so no zero-area triangle appears when the file is read back
+/// and welded); a mesh far from the origin is stored relative to a node translation. Normals are
+/// written unit length when `mesh.normals` is non-empty. Fails with [`IoError::Encode`] on an
+/// empty mesh, out-of-range indices or coordinates that are not finite in f32.
+pub fn encode_glb_with(
+    mesh: &TriMesh,
+    meta: &MeshMeta,
+    compression: GlbCompression,
+) -> Result<Vec<u8>, IoError> {
+    let (out, vertices, triangles, colors) = match compression {
+        GlbCompression::Meshopt => {
+            let (out, v, t) = pack::encode_compressed(mesh, meta)?;
+            (out, v, t, !mesh.colors.is_empty())
+        }
+        GlbCompression::None => encode_float(mesh, meta)?,
+    };
+    let back = decode_glb(&out).map_err(|e| enc_err(format!("read-back failed: {e}")))?;
+    if back.vertices.len() != vertices
+        || back.triangles.len() != triangles
+        || back.colors.is_empty() == colors
+    {
+        return Err(enc_err(format!(
+            "read-back mismatch: wrote {vertices} vertices / {triangles} triangles, read {} / {}",
+            back.vertices.len(),
+            back.triangles.len()
+        )));
+    }
+    Ok(out)
+}
+
+/// The plain float GLB: bytes, vertex and triangle counts, whether colours were written.
+fn encode_float(mesh: &TriMesh, meta: &MeshMeta) -> Result<(Vec<u8>, usize, usize, bool), IoError> {
     check_mesh(mesh, "GLB")?;
     let origin = origin_for(mesh);
     let shifted = shift(mesh, origin);
@@ -207,21 +309,12 @@ pub fn encode_glb_with(mesh: &TriMesh, meta: &MeshMeta) -> Result<Vec<u8>, IoErr
         origin,
     };
     let out = container(&document(&layout), meta, bin)?;
-    let back = decode_glb(&out).map_err(|e| enc_err(format!("read-back failed: {e}")))?;
-    let colors_back = back.colors.len() == mesh.colors.len();
-    if back.vertices.len() != pos.len()
-        || back.triangles.len() != mesh.triangles.len()
-        || !colors_back
-    {
-        return Err(enc_err(format!(
-            "read-back mismatch: wrote {} vertices / {} triangles, read {} / {}",
-            pos.len(),
-            mesh.triangles.len(),
-            back.vertices.len(),
-            back.triangles.len()
-        )));
-    }
-    Ok(out)
+    Ok((
+        out,
+        pos.len(),
+        mesh.triangles.len(),
+        !mesh.colors.is_empty(),
+    ))
 }
 
 /// Per-axis (min, max) of f32 positions.
@@ -360,7 +453,16 @@ pub(super) fn container(
     meta: &MeshMeta,
     bin: Vec<u8>,
 ) -> Result<Vec<u8>, IoError> {
-    let mut value = json::serialize::to_value(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+    let value = json::serialize::to_value(root).map_err(|e| enc_err(format!("JSON: {e}")))?;
+    container_value(value, meta, bin)
+}
+
+/// [`container`] for a JSON document already built as a value.
+pub(super) fn container_value(
+    mut value: serde_json::Value,
+    meta: &MeshMeta,
+    bin: Vec<u8>,
+) -> Result<Vec<u8>, IoError> {
     if let (Some(crs), Some(asset)) = (&meta.crs, value.get_mut("asset")) {
         asset["extras"] = serde_json::json!({ "crs": crs });
     }
@@ -378,6 +480,24 @@ pub(super) fn container(
     glb.to_writer(&mut out)
         .map_err(|e| enc_err(format!("GLB container: {e}")))?;
     Ok(out)
+}
+
+/// `glb` with `asset.extras[key] = value` added (the BIN chunk unchanged).
+pub(crate) fn with_asset_extra(
+    glb: &[u8],
+    key: &str,
+    value: serde_json::Value,
+) -> Result<Vec<u8>, IoError> {
+    let g = gltf::binary::Glb::from_slice(glb).map_err(|e| enc_err(format!("GLB: {e}")))?;
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&g.json).map_err(|e| enc_err(format!("JSON: {e}")))?;
+    let asset = &mut doc["asset"];
+    if !asset["extras"].is_object() {
+        asset["extras"] = serde_json::json!({});
+    }
+    asset["extras"][key] = value;
+    let bin = g.bin.map(|b| b.into_owned()).unwrap_or_default();
+    container_value(doc, &MeshMeta::default(), bin)
 }
 
 /// sRGB transfer function inverse (IEC 61966-2-1): encoded value in [0, 1] → linear light.
@@ -399,157 +519,6 @@ pub(crate) fn linear_to_srgb(c: f32) -> f32 {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-
-    /// Octahedron with outward normals of length 2 (the writer must renormalise them).
-    pub(crate) fn octahedron() -> TriMesh {
-        let vertices = vec![
-            [1.5, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0 / 3.0],
-        ];
-        let normals = vertices
-            .iter()
-            .map(|&p: &Point3| normalized(p).unwrap().map(|c| 2.0 * c))
-            .collect();
-        let triangles = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
-        TriMesh {
-            vertices,
-            normals,
-            triangles,
-            colors: Vec::new(),
-        }
-    }
-
-    fn chunks(glb: &[u8]) -> (&[u8], &[u8]) {
-        let u = |o: usize| u32::from_le_bytes(glb[o..o + 4].try_into().unwrap()) as usize;
-        assert_eq!(u(8), glb.len(), "header length");
-        let jl = u(12);
-        assert_eq!(&glb[16..20], b"JSON");
-        let json = &glb[20..20 + jl];
-        let b0 = 20 + jl;
-        assert_eq!(&glb[b0 + 4..b0 + 8], b"BIN\0");
-        (json, &glb[b0 + 8..b0 + 8 + u(b0)])
-    }
-
-    #[test]
-    fn round_trip_and_container_layout() {
-        let m = octahedron();
-        let glb = encode_glb(&m).unwrap();
-        let back = decode_glb(&glb).unwrap();
-        assert_eq!(back.triangles, m.triangles);
-        for (a, b) in back.vertices.iter().zip(&m.vertices) {
-            assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-7), "{a:?} {b:?}");
-        }
-        for (n, p) in back.normals.iter().zip(&m.vertices) {
-            let want = normalized(*p).unwrap();
-            assert!((0..3).all(|k| (n[k] - want[k]).abs() < 1e-6), "{n:?}");
-        }
-        let (json, bin) = chunks(&glb);
-        assert_eq!(json.len() % 4, 0);
-        assert_eq!(bin.len() % 4, 0);
-        assert_eq!(bin.len(), 6 * 24 + 8 * 12);
-        let v: serde_json::Value = serde_json::from_slice(json).unwrap();
-        assert_eq!(v["asset"]["generator"], "rbfsurf");
-        let pos = &v["accessors"][0];
-        let f = |x: f64| f64::from(x as f32);
-        assert_eq!(
-            pos["min"],
-            serde_json::json!([f(-1.0), f(-1.0), f(-1.0 / 3.0)])
-        );
-        assert_eq!(pos["max"], serde_json::json!([f(1.5), f(1.0), f(1.0)]));
-        assert!(v["accessors"][2].get("min").is_none());
-        assert_eq!(v["bufferViews"][2]["target"], 34963);
-    }
-
-    #[test]
-    fn json_padding_is_spaces() {
-        // Vary the vertex count so the JSON length takes several values mod 4.
-        let mut m = octahedron();
-        m.normals.clear();
-        for extra in 0..4 {
-            m.vertices.push([f64::from(extra), 0.125, 7.0]);
-            let glb = encode_glb(&m).unwrap();
-            let (json, _) = chunks(&glb);
-            let text = std::str::from_utf8(json).unwrap();
-            assert_eq!(
-                text.trim_end().len() + text.len() - text.trim_end().len(),
-                json.len()
-            );
-            assert!(text.trim_end().ends_with('}'));
-            assert!(json[text.trim_end().len()..].iter().all(|&b| b == b' '));
-            assert!(decode_glb(&glb).unwrap().normals.is_empty());
-        }
-    }
-
-    #[test]
-    fn degenerate_normals_fall_back_to_faces() {
-        let mut m = octahedron();
-        m.normals[4] = [0.0, 0.0, 0.0];
-        m.normals[0] = [f64::NAN, 0.0, 0.0];
-        let back = decode_glb(&encode_glb(&m).unwrap()).unwrap();
-        let n4 = back.normals[4];
-        assert!(
-            n4[2] > 0.9 && (crate::geometry::norm(n4) - 1.0).abs() < 1e-6,
-            "{n4:?}"
-        );
-        assert!(back.normals[0][0] > 0.5, "{:?}", back.normals[0]);
-    }
-
-    #[test]
-    fn bad_meshes_are_rejected() {
-        let m = octahedron();
-        let mut bad = m.clone();
-        bad.triangles[3] = [0, 1, 6];
-        assert!(matches!(encode_glb(&bad), Err(IoError::Encode { .. })));
-        let mut bad = m.clone();
-        bad.vertices[2][1] = f64::INFINITY;
-        assert!(matches!(encode_glb(&bad), Err(IoError::Encode { .. })));
-        let mut bad = m.clone();
-        bad.vertices[2][1] = 1e300;
-        assert!(matches!(encode_glb(&bad), Err(IoError::Encode { .. })));
-        let mut bad = m.clone();
-        bad.normals.pop();
-        assert!(matches!(encode_glb(&bad), Err(IoError::Encode { .. })));
-        assert!(matches!(
-            encode_glb(&TriMesh::default()),
-            Err(IoError::Encode { .. })
-        ));
-    }
-
-    #[test]
-    fn decoding_damaged_glb_never_panics() {
-        let glb = encode_glb(&octahedron()).unwrap();
-        assert!(matches!(
-            decode_glb(b"glTF garbage"),
-            Err(IoError::Invalid { .. })
-        ));
-        for cut in 0..glb.len() {
-            assert!(decode_glb(&glb[..cut]).is_err(), "cut at {cut}");
-        }
-        // Corrupt the BIN chunk length / offsets: still an error or a valid mesh, never a panic.
-        let mut st = 7u64;
-        for _ in 0..300 {
-            st = st
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let mut g = glb.clone();
-            let i = (st >> 33) as usize % g.len();
-            g[i] ^= (st >> 20) as u8 | 1;
-            let _ = decode_glb(&g);
-        }
-    }
-}
+mod compact_tests;
+#[cfg(test)]
+pub(crate) mod tests;

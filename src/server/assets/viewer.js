@@ -1,6 +1,7 @@
 // rbfsurf viewer: upload a point file, follow the job by server-sent events, then show the
-// returned binary glTF with plain WebGL (no libraries, works offline). The GLB reader handles the
-// files rbfsurf writes: one indexed triangle primitive with POSITION (+ NORMAL, + COLOR_0 vertex
+// returned binary glTF with plain WebGL (no libraries but the vendored meshoptimizer decoder, works
+// offline). The GLB reader handles the files rbfsurf writes, plain or compact (quantized +
+// meshopt-compressed): one indexed triangle primitive with POSITION (+ NORMAL, + COLOR_0 vertex
 // colours, linear RGB in the file, shown sRGB-encoded; orange when the mesh has none) per mesh; a
 // morph's GLB (one mesh per frame node, a STEP animation) is played frame by frame. Two finished
 // jobs can be composed (union, intersection, difference, blend) or morphed through the volume API.
@@ -32,7 +33,7 @@ function choose(file) {
 function queryString() {
   const q = new URLSearchParams();
   for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver", "boundary",
-                   "min-component", "smoothing", "outlier-std-ratio", "color"]) {
+                   "min-component", "smoothing", "outlier-std-ratio", "color", "lods"]) {
     const v = $(k).value.trim();
     if (v) q.set(k, v);
   }
@@ -103,9 +104,25 @@ async function finished(v) {
     `<a href="${base}/mesh.ply" download>PLY</a> · <a href="${base}/mesh.obj" download>OBJ</a> · ` +
     `<a href="${base}/report" target="_blank">report</a>`;
   try {
+    // Levels of detail (when the job asked for them), coarse to fine, then the full mesh; all in
+    // the frame of the first file shown, the camera kept between them.
+    const levels = [];
+    for (let k = 1; k <= 8; k++) {
+      const r = await fetch(`${base}/lods/${k}`, { method: "HEAD" });
+      if (!r.ok) break;
+      levels.unshift(k);
+    }
+    let origin = null;
+    for (const k of levels) {
+      const lod = await parseGlb(await (await fetch(`${base}/lods/${k}`)).arrayBuffer(), origin);
+      viewer.setMesh(lod, origin !== null);
+      origin = lod.origin;
+      console.info(`level of detail ${k}: ${lod.indices.length / 3} triangles`);
+      setStatus(`level of detail ${k}: ${lod.indices.length / 3} triangles; loading the full mesh…`);
+    }
     const buf = await (await fetch(`${base}/mesh.glb`)).arrayBuffer();
-    const mesh = parseGlb(buf);
-    viewer.setMesh(mesh);
+    const mesh = await parseGlb(buf, origin);
+    viewer.setMesh(mesh, origin !== null);
     setStatus(`loaded ${mesh.indices.length / 3} triangles` + (mesh.colored ? " with vertex colours" : ""));
   } catch (e) {
     setStatus("Cannot display the mesh: " + e.message, true);
@@ -141,7 +158,46 @@ function showStats(r) {
 }
 
 // ---------- GLB reader ----------
-function parseGlb(buf) {
+// Plain float glTF or the compact form rbfsurf writes by default: KHR_mesh_quantization (integer
+// positions dequantized by the node's translation/rotation/scale, normalized byte normals, short
+// colours) and EXT_meshopt_compression (bufferViews decoded with the vendored meshoptimizer
+// decoder, /assets/meshopt_decoder.mjs, loaded on first use; no network access beyond this server).
+let meshoptDecoder = null;
+async function meshopt() {
+  if (!meshoptDecoder) {
+    const { MeshoptDecoder } = await import("/assets/meshopt_decoder.mjs");
+    await MeshoptDecoder.ready;
+    meshoptDecoder = MeshoptDecoder;
+  }
+  return meshoptDecoder;
+}
+
+// Decoded bytes of every bufferView: { bytes: Uint8Array, stride }.
+async function viewBytes(json, bin) {
+  const views = json.bufferViews || [];
+  const compressed = views.some((v) => v.extensions && v.extensions.EXT_meshopt_compression);
+  const dec = compressed ? await meshopt() : null;
+  return views.map((v) => {
+    const ext = v.extensions && v.extensions.EXT_meshopt_compression;
+    if (!ext) return { bytes: new Uint8Array(bin, v.byteOffset || 0, v.byteLength), stride: v.byteStride || 0 };
+    const source = new Uint8Array(bin, ext.byteOffset || 0, ext.byteLength);
+    const target = new Uint8Array(ext.count * ext.byteStride);
+    dec.decodeGltfBuffer(target, ext.count, ext.byteStride, source, ext.mode, ext.filter);
+    return { bytes: target, stride: ext.byteStride };
+  });
+}
+
+// A node's local matrix (column-major 4×4) from matrix or translation/rotation/scale.
+function nodeMatrix(n) {
+  if (n.matrix) return n.matrix;
+  const [x, y, z, w] = n.rotation || [0, 0, 0, 1], s = n.scale || [1, 1, 1], t = n.translation || [0, 0, 0];
+  return [(1 - 2 * (y * y + z * z)) * s[0], 2 * (x * y + z * w) * s[0], 2 * (x * z - y * w) * s[0], 0,
+          2 * (x * y - z * w) * s[1], (1 - 2 * (x * x + z * z)) * s[1], 2 * (y * z + x * w) * s[1], 0,
+          2 * (x * z + y * w) * s[2], 2 * (y * z - x * w) * s[2], (1 - 2 * (x * x + y * y)) * s[2], 0,
+          t[0], t[1], t[2], 1];
+}
+
+async function parseGlb(buf, origin) {
   const dv = new DataView(buf);
   if (buf.byteLength < 20 || dv.getUint32(0, true) !== 0x46546c67) throw new Error("not a GLB file");
   let off = 12, json = null, bin = null;
@@ -153,38 +209,70 @@ function parseGlb(buf) {
     off = start + len;
   }
   if (!json || !bin) throw new Error("GLB without JSON or BIN chunk");
+  const views = await viewBytes(json, bin);
+  const Types = { 5120: Int8Array, 5121: Uint8Array, 5122: Int16Array, 5123: Uint16Array, 5125: Uint32Array, 5126: Float32Array };
+  const Norm = { 5120: 127, 5121: 255, 5122: 32767, 5123: 65535 };
+  // Accessor values as numbers (normalized integers scaled to [-1, 1] / [0, 1]).
   const read = (index, comps) => {
     const acc = json.accessors[index];
-    const view = json.bufferViews[acc.bufferView];
-    const start = (view.byteOffset || 0) + (acc.byteOffset || 0);
-    const Types = { 5126: Float32Array, 5125: Uint32Array, 5123: Uint16Array, 5121: Uint8Array };
+    const view = views[acc.bufferView];
     const T = Types[acc.componentType];
     if (!T) throw new Error("unsupported component type " + acc.componentType);
-    const stride = view.byteStride || T.BYTES_PER_ELEMENT * comps;
-    const out = new T(acc.count * comps);
-    const src = new DataView(bin);
-    for (let i = 0; i < acc.count; i++) {
+    const size = T.BYTES_PER_ELEMENT;
+    const stride = view.stride || size * comps;
+    const src = new DataView(view.bytes.buffer, view.bytes.byteOffset, view.bytes.byteLength);
+    const get = { 5120: (o) => src.getInt8(o), 5121: (o) => src.getUint8(o), 5122: (o) => src.getInt16(o, true),
+      5123: (o) => src.getUint16(o, true), 5125: (o) => src.getUint32(o, true), 5126: (o) => src.getFloat32(o, true) }[acc.componentType];
+    const scale = acc.normalized ? 1 / Norm[acc.componentType] : 1;
+    const out = new (acc.componentType === 5125 ? Uint32Array : Float64Array)(acc.count * comps);
+    for (let i = 0; i < acc.count; i++)
       for (let c = 0; c < comps; c++) {
-        const at = start + i * stride + c * T.BYTES_PER_ELEMENT;
-        out[i * comps + c] = T === Float32Array ? src.getFloat32(at, true) : T === Uint32Array ? src.getUint32(at, true)
-          : T === Uint16Array ? src.getUint16(at, true) : src.getUint8(at);
+        const v = get((acc.byteOffset || 0) + i * stride + c * size) * scale;
+        out[i * comps + c] = acc.normalized && v < -1 ? -1 : v;
       }
-    }
     return out;
   };
-  const meshOf = (mesh) => {
-    const prim = mesh.primitives[0];
-    const positions = read(prim.attributes.POSITION, 3);
-    const indices = Uint32Array.from(read(prim.indices, 1));
-    const normals = prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : vertexNormals(positions, indices);
-    const colored = prim.attributes.COLOR_0 !== undefined;
-    return { positions, normals, indices, colored, colors: colored ? vertexColors(json, prim, read, positions.length / 3) : null };
+  // Positions through the node matrix, relative to `origin` (f64 until then: far-from-origin
+  // scans keep their precision); normals through its linear part, renormalised. A singular matrix
+  // (a hidden morph frame, scale 0) moves by its translation only.
+  const place = (p, n, m) => {
+    const det = m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) + m[8] * (m[1] * m[6] - m[5] * m[2]);
+    const lin = Math.abs(det) > 1e-30 ? m : [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0];
+    const pos = new Float32Array(p.length);
+    for (let i = 0; i < p.length; i += 3)
+      for (let d = 0; d < 3; d++)
+        pos[i + d] = lin[d] * p[i] + lin[4 + d] * p[i + 1] + lin[8 + d] * p[i + 2] + (m[12 + d] - origin[d]);
+    if (!n) return { pos, nrm: null };
+    const nrm = new Float32Array(n.length);
+    for (let i = 0; i < n.length; i += 3) {
+      // Uniform scale and rotation: the linear part itself, renormalised.
+      const v = [0, 1, 2].map((d) => lin[d] * n[i] + lin[4 + d] * n[i + 1] + lin[8 + d] * n[i + 2]);
+      const l = Math.hypot(...v) || 1;
+      for (let d = 0; d < 3; d++) nrm[i + d] = v[d] / l;
+    }
+    return { pos, nrm };
   };
-  const first = meshOf(json.meshes[0]);
+  const nodes = json.nodes || [];
+  if (!origin) {
+    const first = nodes.find((n) => n.mesh === 0);
+    origin = (first && first.translation) || [0, 0, 0];
+  }
+  const meshOf = (index) => {
+    const prim = json.meshes[index].primitives[0];
+    const node = nodes.find((n) => n.mesh === index);
+    const { pos: positions, nrm } = place(read(prim.attributes.POSITION, 3),
+      prim.attributes.NORMAL !== undefined ? read(prim.attributes.NORMAL, 3) : null,
+      node ? nodeMatrix(node) : nodeMatrix({}));
+    const indices = Uint32Array.from(read(prim.indices, 1));
+    const normals = nrm || vertexNormals(positions, indices);
+    const colored = prim.attributes.COLOR_0 !== undefined;
+    return { positions, normals, indices, colored, origin, colors: colored ? vertexColors(json, prim, read, positions.length / 3) : null };
+  };
+  const first = meshOf(0);
   // A morph: one node per frame (scene order), shown one at a time by a STEP animation.
   if (json.animations && json.animations.length && json.meshes.length > 1) {
-    const nodes = json.scenes[json.scene || 0].nodes.map((n) => json.nodes[n]);
-    first.frames = nodes.map((n) => (n.mesh === 0 ? first : meshOf(json.meshes[n.mesh])));
+    const frameNodes = json.scenes[json.scene || 0].nodes.map((n) => nodes[n]);
+    first.frames = frameNodes.map((n) => (n.mesh === 0 ? first : meshOf(n.mesh)));
     const times = read(json.animations[0].samplers[0].input, 1);
     first.frameSeconds = times.length > 1 ? times[1] - times[0] : 0.25;
   }
@@ -192,16 +280,15 @@ function parseGlb(buf) {
 }
 
 // COLOR_0 as sRGB-encoded floats for display (the file holds linear RGB, VEC3 or VEC4; float or
-// normalized unsigned byte/short).
+// normalized unsigned byte/short, which `read` already scaled to [0, 1]).
 function vertexColors(json, prim, read, n) {
   const acc = json.accessors[prim.attributes.COLOR_0];
   const comps = acc.type === "VEC4" ? 4 : 3;
   const raw = read(prim.attributes.COLOR_0, comps);
-  const scale = { 5126: 1, 5121: 1 / 255, 5123: 1 / 65535 }[acc.componentType] || 1;
   const out = new Float32Array(n * 3);
   const encode = (c) => c <= 0.0031308 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
   for (let i = 0; i < n; i++)
-    for (let d = 0; d < 3; d++) out[i * 3 + d] = encode(Math.min(1, Math.max(0, raw[i * comps + d] * scale)));
+    for (let d = 0; d < 3; d++) out[i * 3 + d] = encode(Math.min(1, Math.max(0, raw[i * comps + d])));
   return out;
 }
 
@@ -246,14 +333,17 @@ function createViewer(canvas) {
   let buffers = null;
 
   let frames = [], timer = null;
-  function setMesh(m) {
+  // Shows `m`; `refine`: a finer level of detail of the mesh shown (same frame, camera kept).
+  function setMesh(m, refine) {
     const list = m.frames || [m];
     let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
     for (const f of list)
       for (let i = 0; i < f.positions.length; i += 3)
         for (let d = 0; d < 3; d++) { lo[d] = Math.min(lo[d], f.positions[i + d]); hi[d] = Math.max(hi[d], f.positions[i + d]); }
-    state.center = lo.map((l, d) => (l + hi[d]) / 2);
-    state.scale = 2 / Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-30);
+    if (!refine) {
+      state.center = lo.map((l, d) => (l + hi[d]) / 2);
+      state.scale = 2 / Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-30);
+    }
     const mk = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
     const colorsOf = (f) => {
       if (f.colors) return f.colors;
@@ -261,6 +351,7 @@ function createViewer(canvas) {
       for (let i = 0; i < c.length; i += 3) c.set([0.88, 0.53, 0.23], i);
       return c;
     };
+    for (const f of frames) for (const b of [f.pos, f.nrm, f.col, f.idx]) gl.deleteBuffer(b);
     frames = list.map((f) => ({ pos: mk(gl.ARRAY_BUFFER, f.positions), nrm: mk(gl.ARRAY_BUFFER, new Float32Array(f.normals)),
       col: mk(gl.ARRAY_BUFFER, colorsOf(f)), idx: mk(gl.ELEMENT_ARRAY_BUFFER, f.indices), count: f.indices.length }));
     if (timer) clearInterval(timer);
@@ -273,7 +364,7 @@ function createViewer(canvas) {
       timer = setInterval(() => { k = (k + 1) % (frames.length + 2); if (k < frames.length) { show(); draw(); } },
         1000 * (m.frameSeconds || 0.25));
     }
-    resetView();
+    if (refine) draw(); else resetView();
   }
 
   function resetView() { state.yaw = 0.6; state.pitch = 0.35; state.dist = 3.4; draw(); }

@@ -13,6 +13,11 @@ use serde::{Deserialize, Serialize};
 const INDEX_HTML: &str = include_str!("../assets/index.html");
 /// The viewer's script: GLB parsing, WebGL rendering, orbit/zoom, the upload flow.
 const VIEWER_JS: &str = include_str!("../assets/viewer.js");
+/// meshoptimizer's glTF buffer decoder (npm `meshoptimizer` 1.3.0, MIT, vendored unchanged; its
+/// licence is `assets/meshopt_decoder.LICENSE.md`): the viewer decodes compact GLBs with it.
+const MESHOPT_DECODER_JS: &str = include_str!("../assets/meshopt_decoder.mjs");
+/// The decoder's licence text.
+const MESHOPT_LICENSE: &str = include_str!("../assets/meshopt_decoder.LICENSE.md");
 
 /// Answer of `/healthz`.
 #[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
@@ -84,6 +89,31 @@ pub async fn viewer_js() -> Response {
             (header::CACHE_CONTROL, "no-cache"),
         ],
         VIEWER_JS,
+    )
+        .into_response()
+}
+
+/// The meshoptimizer decoder module the viewer imports for `EXT_meshopt_compression`.
+#[utoipa::path(get, path = "/assets/meshopt_decoder.mjs", tag = "service",
+    responses((status = 200, description = "meshoptimizer decoder (ES module, MIT licence at /assets/meshopt_decoder.LICENSE.md)", content_type = "text/javascript", body = String)))]
+pub async fn meshopt_decoder_js() -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, "text/javascript; charset=utf-8"),
+            (header::CACHE_CONTROL, "public, max-age=86400"),
+        ],
+        MESHOPT_DECODER_JS,
+    )
+        .into_response()
+}
+
+/// The meshoptimizer decoder's licence (MIT).
+#[utoipa::path(get, path = "/assets/meshopt_decoder.LICENSE.md", tag = "service",
+    responses((status = 200, description = "licence of the vendored meshoptimizer decoder", content_type = "text/markdown", body = String)))]
+pub async fn meshopt_license() -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/markdown; charset=utf-8")],
+        MESHOPT_LICENSE,
     )
         .into_response()
 }

@@ -254,12 +254,12 @@ async fn mesh_file(st: &AppState, id: &str, format: MeshFormat) -> Result<Respon
         return Err(not_ready(&view));
     }
     let (name, ctype) = match format {
-        MeshFormat::Glb => ("mesh.glb", "model/gltf-binary"),
+        MeshFormat::Glb(_) => ("mesh.glb", "model/gltf-binary"),
         MeshFormat::Ply => ("mesh.ply", "application/ply"),
         MeshFormat::Obj => ("mesh.obj", "model/obj"),
     };
     let path = st.jobs.store().file(view.id, name);
-    if format != MeshFormat::Glb && !path.exists() {
+    if !matches!(format, MeshFormat::Glb(_)) && !path.exists() {
         let glb = st.jobs.store().file(view.id, "mesh.glb");
         let out = path.clone();
         tokio::task::spawn_blocking(move || -> Result<(), crate::io::IoError> {
@@ -279,16 +279,22 @@ async fn mesh_file(st: &AppState, id: &str, format: MeshFormat) -> Result<Respon
     let file = tokio::fs::File::open(&path)
         .await
         .map_err(|e| ApiError::from_io("stored mesh unreadable", &e))?;
+    let download = format!("rbfsurf-{}.{}", view.id, &name[5..]);
+    send_file(file, ctype, &download).await
+}
+
+/// Streams a stored result file as an attachment named `download`.
+async fn send_file(
+    file: tokio::fs::File,
+    ctype: &str,
+    download: &str,
+) -> Result<Response, ApiError> {
     let len = file
         .metadata()
         .await
         .map_err(|e| ApiError::from_io("stored mesh unreadable", &e))?
         .len();
-    let disposition = format!(
-        "attachment; filename=\"rbfsurf-{}.{}\"",
-        view.id,
-        &name[5..]
-    );
+    let disposition = format!("attachment; filename=\"{download}\"");
     let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
     Ok((
         [
@@ -324,7 +330,46 @@ pub async fn mesh_glb(
     State(st): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Response, ApiError> {
-    mesh_file(&st, &id, MeshFormat::Glb).await
+    mesh_file(&st, &id, MeshFormat::Glb(Default::default())).await
+}
+
+/// A simplified level of detail of the mesh, written when the job asked for `lods` (level 1: about a
+/// quarter of the mesh's triangles, each further level a quarter of the previous one's; the
+/// simplification error is in the file's `asset.extras.lod`). The viewer streams them coarse to
+/// fine before the full mesh.
+#[utoipa::path(get, path = "/v1/reconstructions/{id}/lods/{level}", tag = "reconstructions",
+    params(("id" = String, Path, description = "job id (UUID)"),
+        ("level" = u32, Path, description = "level of detail, 1 (finest) to the job's `lods` (at most 8)")),
+    responses((status = 200, description = "the simplified mesh (GLB stored as the job's glb-compression says)", content_type = "model/gltf-binary", body = Vec<u8>),
+        (status = 404, description = "unknown id, or no such level (the job asked for fewer lods)", body = ErrorResponse),
+        (status = 409, description = "the job has no result (not finished, failed or cancelled)", body = ErrorResponse),
+        (status = 500, description = "stored mesh unreadable (error id)", body = ErrorResponse)))]
+pub async fn mesh_lod(
+    State(st): State<AppState>,
+    Path((id, level)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let job = find_job(&st, &id)?;
+    let view = job.view();
+    if view.status != JobStatus::Succeeded {
+        return Err(not_ready(&view));
+    }
+    let no_level = || {
+        ApiError::new(
+            StatusCode::NOT_FOUND,
+            "no_lod",
+            format!(
+                "job {} has no level of detail {level:?}; submit with lods=N (1..=8) to get levels 1..=N",
+                view.id
+            ),
+        )
+    };
+    let k: usize = (level.parse().ok())
+        .filter(|k| (1..=8).contains(k))
+        .ok_or_else(no_level)?;
+    let path = crate::io::lod_path(&st.jobs.store().file(view.id, "mesh.glb"), k);
+    let file = tokio::fs::File::open(&path).await.map_err(|_| no_level())?;
+    let download = format!("rbfsurf-{}.lod{k}.glb", view.id);
+    send_file(file, "model/gltf-binary", &download).await
 }
 
 /// The mesh as binary PLY (converted on first request).
