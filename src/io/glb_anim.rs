@@ -10,7 +10,8 @@ use json::validation::{Checked::Valid, USize64};
 
 use super::IoError;
 use super::glb::{
-    Bounds, check_mesh, container, f32_positions, push_accessor, push_view, unit_normals,
+    Bounds, check_mesh, container, enc_err, f32_positions, push_accessor, push_view, triangle_mesh,
+    unit_normals,
 };
 use crate::geometry::TriMesh;
 
@@ -24,7 +25,7 @@ fn pad4(bin: &mut Vec<u8>) {
 pub fn encode_animated_glb(frames: &[TriMesh], seconds_per_frame: f32) -> Result<Vec<u8>, IoError> {
     if frames.is_empty() || !(seconds_per_frame > 0.0 && seconds_per_frame.is_finite()) {
         return Err(enc_err(
-            "an animation needs at least one frame and a positive duration".into(),
+            "an animation needs at least one frame and a positive duration",
         ));
     }
     let mut root = json::Root::default();
@@ -64,13 +65,6 @@ pub fn encode_animated_glb(frames: &[TriMesh], seconds_per_frame: f32) -> Result
         )));
     }
     Ok(out)
-}
-
-fn enc_err(message: String) -> IoError {
-    IoError::Encode {
-        format: "GLB",
-        message,
-    }
 }
 
 /// The one buffer every view refers to (pushed last: index 0).
@@ -122,20 +116,7 @@ fn push_frame(
     let n = merged.triangles.len() * 3;
     let iv = push_view(root, buffer0(), off, n * 4, Target::ElementArrayBuffer);
     let ia = push_accessor(root, iv, n, (ComponentType::U32, Type::Scalar), None);
-    Ok(root.push(json::Mesh {
-        primitives: vec![json::mesh::Primitive {
-            attributes,
-            indices: Some(ia),
-            mode: Valid(json::mesh::Mode::Triangles),
-            material: None,
-            targets: None,
-            extensions: Default::default(),
-            extras: Default::default(),
-        }],
-        weights: None,
-        extensions: Default::default(),
-        extras: Default::default(),
-    }))
+    Ok(root.push(triangle_mesh(attributes, ia)))
 }
 
 /// One animation: per node a STEP `scale` channel that is 1 at its own key time, 0 at the others.

@@ -283,12 +283,24 @@ pub fn build_winding_grid(
     normals: &[Point3],
     radius: f64,
 ) -> Option<WindingGrid> {
+    let (valid_ids, valid_tree) = usable_points(points, normals)?;
+    winding_grid(points, normals, &valid_tree, &valid_ids, radius).map(|b| *b)
+}
+
+/// The ids of the points with a usable (non-zero) normal and a k-d tree over them (item `k` of
+/// the tree is point `ids[k]`). `None` when no normal is usable or the lengths differ.
+fn usable_points(points: &[Point3], normals: &[Point3]) -> Option<(Vec<u32>, KdTree)> {
+    if normals.len() != points.len() {
+        return None;
+    }
     let valid_ids: Vec<u32> = (0..points.len() as u32)
         .filter(|&i| normals[i as usize] != [0.0; 3])
         .collect();
+    if valid_ids.is_empty() {
+        return None;
+    }
     let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
-    let valid_tree = KdTree::build(&valid_points).ok()?;
-    winding_grid(points, normals, &valid_tree, &valid_ids, radius).map(|b| *b)
+    Some((valid_ids, KdTree::build(&valid_points).ok()?))
 }
 
 /// The winding grid of the points with usable normals: areas from their [`AREA_NEIGHBOURS`]
@@ -456,26 +468,17 @@ impl LocalCarrier {
         radius: f64,
         index: Arc<dyn SpatialIndex + Send>,
     ) -> Option<Self> {
-        let valid_ids: Vec<u32> = (0..points.len() as u32)
-            .filter(|&i| normals[i as usize] != [0.0; 3])
-            .collect();
-        if valid_ids.is_empty() || normals.len() != points.len() {
-            return None;
-        }
-        let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
-        let valid_tree = KdTree::build(&valid_points).ok()?;
+        let (valid_ids, valid_tree) = usable_points(&points, &normals)?;
         let winding =
             winding_grid(&points, &normals, &valid_tree, &valid_ids, radius).map(Arc::from);
-        Some(LocalCarrier {
+        Some(Self::assemble(
             points,
             normals,
             radius,
             index,
-            valid_tree,
-            valid_ids,
+            (valid_ids, valid_tree),
             winding,
-            far_field: Arc::new(AtomicBool::new(true)),
-        })
+        ))
     }
 
     /// A carrier over `points` (a part of a larger cloud, e.g. one block with its halo) whose far
@@ -491,15 +494,21 @@ impl LocalCarrier {
         index: Arc<dyn SpatialIndex + Send>,
         winding: Option<Arc<WindingGrid>>,
     ) -> Option<Self> {
-        let valid_ids: Vec<u32> = (0..points.len() as u32)
-            .filter(|&i| normals.get(i as usize).is_some_and(|n| *n != [0.0; 3]))
-            .collect();
-        if valid_ids.is_empty() || normals.len() != points.len() {
-            return None;
-        }
-        let valid_points: Vec<Point3> = valid_ids.iter().map(|&i| points[i as usize]).collect();
-        let valid_tree = KdTree::build(&valid_points).ok()?;
-        Some(LocalCarrier {
+        let usable = usable_points(&points, &normals)?;
+        Some(Self::assemble(
+            points, normals, radius, index, usable, winding,
+        ))
+    }
+
+    fn assemble(
+        points: Vec<Point3>,
+        normals: Vec<Point3>,
+        radius: f64,
+        index: Arc<dyn SpatialIndex + Send>,
+        (valid_ids, valid_tree): (Vec<u32>, KdTree),
+        winding: Option<Arc<WindingGrid>>,
+    ) -> Self {
+        LocalCarrier {
             points,
             normals,
             radius,
@@ -508,7 +517,7 @@ impl LocalCarrier {
             valid_ids,
             winding,
             far_field: Arc::new(AtomicBool::new(true)),
-        })
+        }
     }
 
     /// The blended points, normalised units.

@@ -92,7 +92,7 @@ impl std::fmt::Display for GlbCompression {
     }
 }
 
-fn enc_err(message: impl Into<String>) -> IoError {
+pub(super) fn enc_err(message: impl Into<String>) -> IoError {
     IoError::Encode {
         format: "GLB",
         message: message.into(),
@@ -417,21 +417,7 @@ fn document(l: &Layout) -> json::Root {
     );
     let scalar = (ComponentType::U32, Type::Scalar);
     let ia = push_accessor(&mut root, iv, l.indices, scalar, None);
-    let primitive = json::mesh::Primitive {
-        attributes,
-        indices: Some(ia),
-        mode: Valid(json::mesh::Mode::Triangles),
-        material: None,
-        targets: None,
-        extensions: Default::default(),
-        extras: Default::default(),
-    };
-    let m = root.push(json::Mesh {
-        primitives: vec![primitive],
-        weights: None,
-        extensions: Default::default(),
-        extras: Default::default(),
-    });
+    let m = root.push(triangle_mesh(attributes, ia));
     let node = root.push(json::Node {
         mesh: Some(m),
         translation: l.origin,
@@ -444,6 +430,30 @@ fn document(l: &Layout) -> json::Root {
     });
     root.scene = Some(scene);
     root
+}
+
+/// One mesh of one indexed triangle primitive, without material.
+pub(super) fn triangle_mesh(
+    attributes: BTreeMap<
+        json::validation::Checked<json::mesh::Semantic>,
+        json::Index<json::Accessor>,
+    >,
+    indices: json::Index<json::Accessor>,
+) -> json::Mesh {
+    json::Mesh {
+        primitives: vec![json::mesh::Primitive {
+            attributes,
+            indices: Some(indices),
+            mode: Valid(json::mesh::Mode::Triangles),
+            material: None,
+            targets: None,
+            extensions: Default::default(),
+            extras: Default::default(),
+        }],
+        weights: None,
+        extensions: Default::default(),
+        extras: Default::default(),
+    }
 }
 
 /// GLB container: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
