@@ -33,54 +33,196 @@ pub(crate) fn merge_f32_duplicates(mesh: &TriMesh) -> Cow<'_, TriMesh> {
 /// keys are never merged. Triangles are remapped and those with a repeated corner dropped; vertices
 /// are renumbered in order of first occurrence. Returns the merged mesh and, for each new vertex,
 /// the index of the old vertex it stands for; `None` when no two keys are equal.
+///
+/// A merge is an edge collapse, and a collapse can break the surface (two sheets closer than the
+/// rounding pinched into one vertex, an edge shared by three triangles). A group whose merge makes a
+/// vertex non-manifold that was manifold before is kept apart instead (its vertices keep their ids,
+/// at the same rounded position: a zero-area sliver, but the mesh stays closed and manifold by its
+/// indices); checked again until no merge breaks a vertex ([`MAX_ROUNDS`], then nothing is merged).
 pub(crate) fn merge_equal_keys<K: std::hash::Hash + Eq + Copy>(
     mesh: &TriMesh,
     keys: &[Option<K>],
     snap: impl Fn(usize) -> [f64; 3],
 ) -> Option<(TriMesh, Vec<usize>)> {
+    let mut apart = vec![false; keys.len()];
+    let mut before: Option<Vec<bool>> = None;
+    for _ in 0..MAX_ROUNDS {
+        let (to, source) = group(keys, &apart);
+        if source.len() == keys.len() {
+            return None;
+        }
+        let triangles = remap_triangles(&mesh.triangles, &to);
+        let blamed = unsafe_groups(mesh, &triangles, &to, source.len(), &mut before);
+        if blamed.is_empty() {
+            return Some((assemble(mesh, triangles, &source, &snap), source));
+        }
+        for v in 0..keys.len() {
+            apart[v] |= blamed.contains(&to[v]);
+        }
+    }
+    None
+}
+
+/// Rounds of [`merge_equal_keys`]' manifold check before it gives up merging.
+const MAX_ROUNDS: usize = 8;
+
+/// `to[v]` (new id of old vertex `v`, numbered by first occurrence) and `source` (old vertex of each
+/// new id): equal `Some` keys share an id unless the vertex is kept `apart`.
+fn group<K: std::hash::Hash + Eq + Copy>(
+    keys: &[Option<K>],
+    apart: &[bool],
+) -> (Vec<u32>, Vec<usize>) {
     let mut first: HashMap<K, u32> = HashMap::with_capacity(keys.len());
     let mut to: Vec<u32> = Vec::with_capacity(keys.len());
     let mut source: Vec<usize> = Vec::with_capacity(keys.len());
     for (v, key) in keys.iter().enumerate() {
         let fresh = source.len() as u32;
         let id = match key {
-            Some(k) => *first.entry(*k).or_insert(fresh),
-            None => fresh,
+            Some(k) if !apart[v] => *first.entry(*k).or_insert(fresh),
+            _ => fresh,
         };
         if id == fresh {
             source.push(v);
         }
         to.push(id);
     }
-    if source.len() == keys.len() {
-        return None;
-    }
-    let has_normals = mesh.normals.len() == mesh.vertices.len();
-    let has_colors = mesh.colors.len() == mesh.vertices.len();
-    let vertices = source.iter().map(|&v| snap(v)).collect();
-    let normals = match has_normals {
-        true => source.iter().map(|&v| mesh.normals[v]).collect(),
-        false => Vec::new(),
-    };
-    let colors = match has_colors {
-        true => source.iter().map(|&v| mesh.colors[v]).collect(),
-        false => Vec::new(),
-    };
-    let triangles = mesh
-        .triangles
-        .iter()
+    (to, source)
+}
+
+/// Triangles through `to`, without those that lost a corner.
+fn remap_triangles(triangles: &[[u32; 3]], to: &[u32]) -> Vec<[u32; 3]> {
+    (triangles.iter())
         .filter_map(|t| {
             let m = t.map(|v| to.get(v as usize).copied().unwrap_or(v));
             (m[0] != m[1] && m[1] != m[2] && m[0] != m[2]).then_some(m)
         })
-        .collect();
-    let merged = TriMesh {
-        vertices,
-        normals,
+        .collect()
+}
+
+fn assemble(
+    mesh: &TriMesh,
+    triangles: Vec<[u32; 3]>,
+    source: &[usize],
+    snap: &impl Fn(usize) -> [f64; 3],
+) -> TriMesh {
+    let n = mesh.vertices.len();
+    TriMesh {
+        vertices: source.iter().map(|&v| snap(v)).collect(),
+        normals: pick(&mesh.normals, source, n),
+        colors: pick(&mesh.colors, source, n),
         triangles,
-        colors,
-    };
-    Some((merged, source))
+    }
+}
+
+/// `attr` of the `source` vertices when it has one item per vertex (`n`), else empty.
+fn pick<T: Copy>(attr: &[T], source: &[usize], n: usize) -> Vec<T> {
+    match attr.len() == n {
+        true => source.iter().map(|&v| attr[v]).collect(),
+        false => Vec::new(),
+    }
+}
+
+/// The merged vertices (new ids, groups of two or more) whose merge made a vertex non-manifold
+/// that was manifold before: a merged vertex itself, or the merged neighbours of a vertex whose
+/// fan broke. `before` caches the original mesh's per-vertex verdict.
+fn unsafe_groups(
+    mesh: &TriMesh,
+    triangles: &[[u32; 3]],
+    to: &[u32],
+    new_len: usize,
+    before: &mut Option<Vec<bool>>,
+) -> std::collections::HashSet<u32> {
+    let n = mesh.vertices.len();
+    let was_bad = before.get_or_insert_with(|| non_manifold_vertices(&mesh.triangles, n));
+    let mut size = vec![0u32; new_len];
+    let mut bad_member = vec![false; new_len];
+    for (v, &m) in to.iter().enumerate() {
+        size[m as usize] += 1;
+        bad_member[m as usize] |= was_bad[v];
+    }
+    let now_bad = non_manifold_vertices(triangles, new_len);
+    let mut blamed = std::collections::HashSet::new();
+    for t in triangles {
+        for (i, &m) in t.iter().enumerate() {
+            let m = m as usize;
+            if !now_bad[m] || bad_member[m] {
+                continue;
+            }
+            if size[m] > 1 {
+                blamed.insert(m as u32);
+            }
+            for &u in [t[(i + 1) % 3], t[(i + 2) % 3]].iter() {
+                if size[u as usize] > 1 {
+                    blamed.insert(u);
+                }
+            }
+        }
+    }
+    blamed
+}
+
+/// Per vertex: its fan is not one oriented disc or half-disc (a link vertex entered or left twice:
+/// a non-manifold or flipped edge; or the link in two or more pieces: a pinch).
+fn non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> Vec<bool> {
+    // Link edges a → b of every vertex (triangle [v, a, b] in its winding order), grouped by vertex.
+    let mut start = vec![0usize; n + 1];
+    let triangles: Vec<&[u32; 3]> = (triangles.iter())
+        .filter(|t| t.iter().all(|&v| (v as usize) < n))
+        .collect();
+    for t in &triangles {
+        for &v in t.iter() {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut link = vec![(0u32, 0u32); start[n]];
+    for t in &triangles {
+        for i in 0..3 {
+            let v = t[i] as usize;
+            link[fill[v]] = (t[(i + 1) % 3], t[(i + 2) % 3]);
+            fill[v] += 1;
+        }
+    }
+    (0..n)
+        .map(|v| !is_disc(&link[start[v]..start[v + 1]]))
+        .collect()
+}
+
+/// Whether the oriented link edges form one cycle or one path.
+fn is_disc(edges: &[(u32, u32)]) -> bool {
+    if edges.is_empty() {
+        return true;
+    }
+    let mut next: HashMap<u32, u32> = HashMap::with_capacity(edges.len());
+    let mut has_in: HashMap<u32, ()> = HashMap::with_capacity(edges.len());
+    for &(a, b) in edges {
+        if next.insert(a, b).is_some() || has_in.insert(b, ()).is_some() {
+            return false;
+        }
+    }
+    let starts: Vec<u32> = (edges.iter())
+        .map(|e| e.0)
+        .filter(|a| !has_in.contains_key(a))
+        .collect();
+    if starts.len() > 1 {
+        return false;
+    }
+    let mut at = starts.first().copied().unwrap_or(edges[0].0);
+    let mut walked = 0;
+    while let Some(&b) = next.get(&at) {
+        walked += 1;
+        if walked > edges.len() {
+            break;
+        }
+        at = b;
+        if starts.is_empty() && at == edges[0].0 {
+            break;
+        }
+    }
+    walked == edges.len()
 }
 
 #[cfg(test)]

@@ -317,3 +317,30 @@ fn random_damage_to_compressed_streams_never_panics() {
         }
     }
 }
+
+#[test]
+fn unused_vertices_are_dropped_not_a_panic() {
+    // A torus plus vertices no triangle uses: one at the end, one in the middle of the list (the
+    // fetch remap once assumed every vertex is used and indexed past its table: a panic on real
+    // scans whose grid merge dropped a vertex's last triangle).
+    let mut m = Shape::by_name("torus").unwrap().truth_mesh(24);
+    let mid = m.vertices.len() as u32 / 2;
+    m.vertices.insert(mid as usize, [0.5, 0.5, 0.5]);
+    if !m.normals.is_empty() {
+        m.normals.insert(mid as usize, [0.0, 0.0, 1.0]);
+    }
+    for t in &mut m.triangles {
+        for v in t.iter_mut() {
+            *v += u32::from(*v >= mid);
+        }
+    }
+    m.vertices.push([0.1, 0.9, 0.5]);
+    if !m.normals.is_empty() {
+        m.normals.push([1.0, 0.0, 0.0]);
+    }
+    let back = decode_glb(&encode_glb(&m).unwrap()).unwrap();
+    assert_eq!(back.vertices.len(), m.vertices.len() - 2);
+    assert_eq!(back.triangles.len(), m.triangles.len());
+    let t = crate::mesh::analyze(&back);
+    assert!(t.watertight && t.components == 1, "{t:?}");
+}

@@ -131,6 +131,23 @@ fn vertex_stream<T>(items: &[T], stride: usize) -> Result<Stream, IoError> {
     })
 }
 
+/// Vertex order of first use in `indices` (`remap[old] = new`, `u32::MAX` for a vertex no
+/// triangle uses) and the number of used vertices. (meshopt 0.7's `optimize_vertex_fetch_remap`
+/// truncates its table to the used count, so it cannot be indexed by every old vertex when a
+/// vertex is unused, e.g. after merging on the grid dropped its last triangle.)
+fn fetch_remap(indices: &[u32], n: usize) -> (Vec<u32>, usize) {
+    let mut remap = vec![u32::MAX; n];
+    let mut used = 0u32;
+    for &i in indices {
+        let r = &mut remap[i as usize];
+        if *r == u32::MAX {
+            *r = used;
+            used += 1;
+        }
+    }
+    (remap, used as usize)
+}
+
 /// Remaps `items` by the fetch-order `remap` (`new[remap[i]] = old[i]`).
 fn remapped<T: Copy + Default>(items: &[T], remap: &[u32], n: usize) -> Vec<T> {
     let mut out = vec![T::default(); n];
@@ -190,8 +207,7 @@ pub(crate) fn quantize(mesh: &TriMesh) -> Result<Quantized, IoError> {
         .collect();
     let flat: Vec<u32> = merged.triangles.iter().flatten().copied().collect();
     let cached = meshopt::optimize_vertex_cache(&flat, n);
-    let remap = meshopt::optimize_vertex_fetch_remap(&cached, n);
-    let used = remap.iter().filter(|&&r| r != u32::MAX).count();
+    let (remap, used) = fetch_remap(&cached, n);
     let indices: Vec<u32> = cached.iter().map(|&i| remap[i as usize]).collect();
     Ok(Quantized {
         grid,
