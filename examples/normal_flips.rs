@@ -5,7 +5,8 @@
 //! - `off18`: unsigned angle to the true line above 18° (PCA errors, independent of orientation).
 //!
 //! Run with `cargo run --release --example normal_flips [-- DATA_DIR]` (default data directory
-//! `../shared/data`). Sets whose file is missing are skipped. `ONLY=text` keeps the generated sets
+//! `../shared/data`; `WRITE_DIR=DIR` writes each set with its estimated normals as
+//! `DIR/NAME-est.ply`; further PLY files with normals may follow it). Sets whose file is missing are skipped. `ONLY=text` keeps the generated sets
 //! whose name contains `text`.
 
 use std::path::{Path, PathBuf};
@@ -36,6 +37,16 @@ fn main() {
             row(name, &cloud);
         }
     }
+    // Further PLY files with normals given after the data directory (e.g. the real-scan suite's
+    // statue samples, target/realscans/*-n.ply).
+    for path in std::env::args().skip(2).map(PathBuf::from) {
+        if let Some(cloud) = read(&path) {
+            let name = path
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into());
+            row(&name, &cloud);
+        }
+    }
     let only = std::env::var("ONLY").ok();
     for (name, cloud) in generated() {
         if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
@@ -57,6 +68,12 @@ fn row(name: &str, cloud: &PointCloud) {
     let est = estimate_oriented_normals(&cloud.points, &NormalParams::default());
     let secs = t.elapsed().as_secs_f64();
     let (flips, off) = errors(&est, truth);
+    if let Some(dir) = std::env::var_os("WRITE_DIR") {
+        let mut out = cloud.clone();
+        out.normals = Some(est.clone());
+        let path = PathBuf::from(dir).join(format!("{}-est.ply", name.replace(' ', "_")));
+        rbfsurf::io::write_points_ply(&path, &out).expect("write estimated normals");
+    }
     let index = build_index(&cloud.points, IndexKind::KdTree, 8).expect("index");
     let opposed = inconsistent_fraction(&cloud.points, truth, 8, |p, k, out| {
         index.nearest_k(p, k, out)

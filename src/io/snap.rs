@@ -328,4 +328,44 @@ mod tests {
         };
         assert!(matches!(merge_f32_duplicates(&far), Cow::Borrowed(_)));
     }
+
+    #[test]
+    fn a_merge_that_would_pinch_two_sheets_is_kept_apart() {
+        // Two closed tetrahedra whose apexes round to one key: merging them would join the two
+        // surfaces at one vertex (a non-manifold pinch). They stay apart; the sliver pair of the
+        // pyramid (a safe collapse) in the same mesh is still merged.
+        let tet = |o: f64| -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+            (
+                vec![
+                    [o, 0.0, 0.0],
+                    [o + 1.0, 0.0, 0.0],
+                    [o, 1.0, 0.0],
+                    [o, 0.0, 1.0],
+                ],
+                vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+            )
+        };
+        let (mut vertices, mut triangles) = tet(0.0);
+        let (v2, t2) = tet(1.0);
+        vertices.extend(v2);
+        triangles.extend(t2.iter().map(|t| t.map(|v| v + 4)));
+        let mesh = TriMesh {
+            vertices,
+            normals: vec![],
+            triangles,
+            colors: Vec::new(),
+        };
+        let before = analyze(&mesh);
+        assert!(before.manifold && before.watertight);
+        // Vertex 1 of the first and vertex 0 of the second coincide already ((1, 0, 0)).
+        let keys: Vec<Option<[u64; 3]>> = (mesh.vertices.iter())
+            .map(|p| Some(p.map(f64::to_bits)))
+            .collect();
+        assert!(merge_equal_keys(&mesh, &keys, |v| mesh.vertices[v]).is_none());
+        // The unguarded merge would have pinched them: check that the guard is what kept them.
+        let (to, source) = group(&keys, &vec![false; keys.len()]);
+        assert_eq!(source.len(), 7);
+        let pinched = remap_triangles(&mesh.triangles, &to);
+        assert!(non_manifold_vertices(&pinched, 7).iter().any(|&b| b));
+    }
 }
