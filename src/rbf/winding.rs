@@ -183,6 +183,9 @@ struct Node {
     moment: Point3,
     /// Largest distance from `centre` to a point of the node.
     radius: f64,
+    /// Softening of the lumped dipole (squared length): the mean area of the node's points, so a
+    /// node of one point lumps to exactly that point's softened dipole.
+    soft: f64,
     /// Children (indices into the node list) or, for a leaf, empty.
     children: Vec<u32>,
     /// Range of the node's points in the tree's order.
@@ -254,6 +257,7 @@ impl DipoleTree {
             centre,
             moment,
             radius,
+            soft: total / slice.len() as f64,
             children: Vec::new(),
             range: range.clone(),
         });
@@ -301,7 +305,11 @@ impl DipoleTree {
             let r = sub(node.centre, x);
             let d = norm(r);
             if node.radius > 0.0 && d > OPENING * node.radius {
-                sum += dipole(r, node.moment, 0.0);
+                // Softened like the node's points: a one-point node's radius is rounding (about
+                // 1e-17, or exactly 0), so whether it is lumped depends on the input's last bits;
+                // unsoftened, the lumped point near `x` counted up to 0.5 more than the same point
+                // summed directly, and the far field jumped with a 1e-14 move of one input point.
+                sum += dipole(r, node.moment, node.soft);
             } else if node.children.is_empty() {
                 for j in node.range.clone() {
                     sum += dipole(sub(self.points[j], x), self.moments[j], self.soft[j]);
@@ -374,6 +382,44 @@ mod tests {
         let g = WindingGrid::build(&p, &n, &a, &dom, 0.05).unwrap();
         assert!((g.value_gradient(&[0.05, -0.02, 0.0]).0 - 1.0).abs() < 0.05);
         assert!(g.value_gradient(&[0.58, 0.58, 0.0]).0.abs() < 0.05);
+    }
+
+    #[test]
+    fn a_one_point_node_counts_like_its_point() {
+        // Nine points: eight in one corner, one alone in the opposite octant. The lone point's
+        // node has a radius of pure rounding (its area-weighted centre `a p / a` is off by 1e-16),
+        // so it is lumped from any distance; lumped without softening it counted several times
+        // its softened value near the point (the far field then jumped with the input's last bits).
+        let mut p: Vec<Point3> = (0..8)
+            .map(|k| {
+                [
+                    0.1 + 0.01 * (k & 1) as f64,
+                    0.1 + 0.01 * ((k >> 1) & 1) as f64,
+                    0.1 + 0.01 * (k >> 2) as f64,
+                ]
+            })
+            .collect();
+        p.push([0.9, 0.9, 0.9]);
+        let n = vec![[0.0, 0.0, 1.0]; 9];
+        let a = vec![3e-4; 9];
+        let tree = DipoleTree::build(&p, &n, &a).unwrap();
+        let lone = (tree.nodes.iter())
+            .find(|n| n.range.len() == 1 && n.centre[0] > 0.5)
+            .unwrap();
+        assert!(
+            lone.radius > 0.0,
+            "this layout's centre should be off by rounding"
+        );
+        for x in [[0.9, 0.9, 0.88], [0.91, 0.9, 0.89], [0.9, 0.89, 0.92]] {
+            let direct: f64 = (0..9)
+                .map(|j| dipole(sub(p[j], x), n[j].map(|v| v * a[j]), a[j]))
+                .sum();
+            let bh = tree.winding(x);
+            assert!(
+                (bh - direct).abs() < 1e-3 * direct.abs().max(1e-3),
+                "tree {bh} vs direct {direct}"
+            );
+        }
     }
 
     #[test]
