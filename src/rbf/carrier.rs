@@ -222,6 +222,12 @@ fn ellipsoid_local(
 
 /// Distance from the data, in support radii, where the far field starts to take over.
 const FAR_FROM: f64 = 0.5;
+/// Distance from the data, in support radii, where the winding number starts to overrule planes
+/// that disagree with it (see [`LocalCarrier`]'s far field), and the width of that hand-over.
+const GUARD_FROM: f64 = 0.25;
+const GUARD_WIDTH: f64 = 0.5;
+/// Disagreement `−g (1 − 2w)` (normalised units, in support radii) at which the guard is fully on.
+const GUARD_SCALE: f64 = 0.125;
 
 /// The C¹ smoothstep `3u² − 2u³` of `u` clamped to [0, 1], and its derivative.
 fn smoothstep(u: f64) -> (f64, f64) {
@@ -622,7 +628,10 @@ impl LocalCarrier {
             (local, knn[0].1, ids[0] as usize)
         };
         match &self.winding {
-            Some(w) if d1 > FAR_FROM * self.radius && self.far_field.load(Ordering::Relaxed) => {
+            Some(w)
+                if d1 > GUARD_FROM.min(FAR_FROM) * self.radius
+                    && self.far_field.load(Ordering::Relaxed) =>
+            {
                 self.with_far_field::<GRAD>(x, local, w, d1, self.points[nearest])
             }
             _ => local,
@@ -644,11 +653,20 @@ impl LocalCarrier {
     }
 
     /// Blend the local value with the winding far field `d₁ (1 − 2w)` (about ±d₁ outside / inside):
-    /// `g = (1 − τ) g_local + τ g_far` with `τ = s((d₁ − R/2)/R) · c`, `s` the C¹ smoothstep, `d₁`
-    /// the distance to the nearest point and `c` the far field's confidence: 1 where `w` is
-    /// decisively inside or outside (`|1 − 2w| ≥ 0.6`), 0 where it is undecided
+    /// `g = (1 − τ) g_local + τ g_far`, `d₁` the distance to the nearest point. `τ` combines two
+    /// hand-overs (`τ = 1 − (1 − τ_far)(1 − τ_guard)`), each scaled by the far field's confidence
+    /// `c`: 1 where `w` is decisively inside or outside (`|1 − 2w| ≥ 0.6`), 0 where it is undecided
     /// (`|1 − 2w| ≤ 0.2`: beside an open sheet, across a wide hole), where the tangent planes keep
-    /// deciding as before. The data points themselves (`d₁ = 0`) see only the planes, so the
+    /// deciding as before.
+    /// - `τ_far = s((d₁ − R/2)/R) · c`: off the data the winding number decides.
+    /// - `τ_guard = s((d₁ − R/4)/(R/2)) · c · D`: nearer the data, only where the planes and the
+    ///   winding number disagree about the side (`D = s(−g_local (1 − 2w) / (R/8))`, 0 where they
+    ///   agree). Between limbs closer than about `2R` and in concavities, the planes of the limb's far
+    ///   side or of the curved part outvote the near ones and leave a stray sheet of the carrier there
+    ///   (a handle); the winding number of all the oriented points knows the side. Where the two agree
+    ///   (every sample of a clean closed surface near the data) nothing changes.
+    ///
+    /// `s` is the C¹ smoothstep. The data points themselves (`d₁ = 0`) see only the planes, so the
     /// offsets and the spline do not change.
     fn with_far_field<const GRAD: bool>(
         &self,
@@ -660,22 +678,33 @@ impl LocalCarrier {
     ) -> (f64, Point3) {
         let r = self.radius;
         let (s1, ds1) = smoothstep((d1 - FAR_FROM * r) / r);
+        let (s2, ds2) = smoothstep((d1 - GUARD_FROM * r) / (GUARD_WIDTH * r));
         let (wv, wg) = w.value_gradient(x);
         let a = 1.0 - 2.0 * wv;
         let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
         let dc_dw = dc / 0.4 * -2.0 * a.signum();
+        let delta = GUARD_SCALE * r;
+        let (dis, ddis) = smoothstep(-gl * a / delta);
         // ±d₁ where decided: distance-like (slope about 1) so the polygonizer's skip test still
         // rules out far cells.
         let gf = d1 * a;
         let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
-        let tau = s1 * c;
+        let tau_far = s1 * c;
+        let tau_guard = s2 * c * dis;
+        let tau = 1.0 - (1.0 - tau_far) * (1.0 - tau_guard);
         let g = (1.0 - tau) * gl + tau * gf;
         if !GRAD {
             return (g, [0.0; 3]);
         }
         let grad = [0, 1, 2].map(|k| {
-            let dtau = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
-            let dgf = -2.0 * d1 * wg[k] + a * dd1[k];
+            let da = -2.0 * wg[k];
+            let dt_far = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
+            let ddis_k = ddis / delta * -(dl[k] * a + gl * da);
+            let dt_guard = ds2 / (GUARD_WIDTH * r) * dd1[k] * c * dis
+                + s2 * dc_dw * wg[k] * dis
+                + s2 * c * ddis_k;
+            let dtau = (1.0 - tau_guard) * dt_far + (1.0 - tau_far) * dt_guard;
+            let dgf = d1 * da + a * dd1[k];
             (1.0 - tau) * dl[k] + tau * dgf + (gf - gl) * dtau
         });
         (g, grad)
