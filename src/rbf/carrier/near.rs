@@ -56,11 +56,16 @@ impl Soa {
         self.zs.clear();
     }
 
-    fn push(&mut self, id: u32, p: Point3) {
-        self.ids.push(id);
-        self.xs.push(p[0]);
-        self.ys.push(p[1]);
-        self.zs.push(p[2]);
+    /// The points `ids` of `points`, in that order (replacing the list).
+    fn fill(&mut self, ids: &[u32], points: &[Point3]) {
+        self.clear();
+        self.ids.extend_from_slice(ids);
+        for (k, out) in [&mut self.xs, &mut self.ys, &mut self.zs]
+            .into_iter()
+            .enumerate()
+        {
+            out.extend(ids.iter().map(|&id| points[id as usize][k]));
+        }
     }
 
     /// `out[k] = |x − p_k|²` for the first `n` points (the arithmetic of [`dist2`]).
@@ -232,9 +237,7 @@ impl LocalCarrier {
                 .map(|o| o.1),
         );
         near.within.sort_unstable();
-        for &id in &near.within {
-            near.inner.push(id, self.points[id as usize]);
-        }
+        near.inner.fill(&near.within, &self.points);
         if near.serve_knn {
             // A counting sort into the shells, keeping the query's order within each.
             near.wide_reach = reach;
@@ -256,9 +259,7 @@ impl LocalCarrier {
                 near.knn[start[s]] = id;
                 start[s] += 1;
             }
-            for &id in &near.knn {
-                near.wide.push(id, self.points[id as usize]);
-            }
+            near.wide.fill(&near.knn, &self.points);
         }
         near.centre = c;
         near.covers2 = h * h;
