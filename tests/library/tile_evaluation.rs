@@ -13,7 +13,6 @@ use rbfsurf::progress::NoProgress;
 use rbfsurf::rbf::carrier::{FAR_NEIGHBOURS, LocalCarrier, NearPoints};
 use rbfsurf::rbf::{Carrier, RbfField};
 use rbfsurf::report::Timings;
-use rbfsurf::spatial::SpatialIndex;
 
 /// The reference: the points within `R` of `x` from the index, ascending (the order the
 /// polygonizer's sorted candidate lists give).
