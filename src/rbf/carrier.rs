@@ -22,6 +22,9 @@ use crate::spatial::{KdTree, SpatialIndex};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+mod near;
+pub use near::NearPoints;
+
 /// Which carrier solid to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -138,7 +141,7 @@ impl Carrier {
                 let (q, _) = ellipsoid_local(x, center, axes, semi_axes);
                 min3(semi_axes) * (norm(q) - 1.0)
             }
-            Carrier::Local(l) => l.value_gradient(x).0,
+            Carrier::Local(l) => l.value(x),
         }
     }
 
@@ -568,6 +571,14 @@ impl LocalCarrier {
         (abs > 0.0 && sum.abs() > 0.05 * abs).then_some(sum < 0.0)
     }
 
+    /// `g(x)`, querying the index (the value [`Self::value_gradient`] gives, without the
+    /// gradient's work).
+    pub fn value(&self, x: &Point3) -> f64 {
+        let mut hits = Vec::with_capacity(64);
+        self.index.within(x, self.radius, &mut hits);
+        self.value_with(x, &hits)
+    }
+
     /// `(g(x), ∇g(x))`, querying the index.
     pub fn value_gradient(&self, x: &Point3) -> (f64, Point3) {
         let mut hits = Vec::with_capacity(64);
@@ -603,30 +614,51 @@ impl LocalCarrier {
                 }
             }
         }
-        let (local, d1, nearest) = if within >= FAR_NEIGHBOURS {
+        if within >= FAR_NEIGHBOURS {
             let local = self.blend::<GRAD>(x, candidates, self.radius, None);
-            (local, nearest.0.sqrt(), nearest.1)
-        } else {
-            // Fewer than K usable points within R: widen the weights to the K nearest ones.
-            let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
-            self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
-            let Some(&(kth, rho)) = knn.last() else {
-                return (0.0, [0.0; 3]);
-            };
-            let ids: Vec<u32> = knn
-                .iter()
-                .map(|&(i, _)| self.valid_ids[i as usize])
-                .collect();
-            let local = if rho <= self.radius {
-                // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
-                self.blend::<GRAD>(x, &ids, self.radius, None)
-            } else {
-                let far = self.points[self.valid_ids[kth as usize] as usize];
-                let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
-                self.blend::<GRAD>(x, &ids, rho, Some(grad_rho))
-            };
-            (local, knn[0].1, ids[0] as usize)
+            return self.add_far_field::<GRAD>(x, local, nearest.0.sqrt(), nearest.1);
+        }
+        self.evaluate_widened::<GRAD>(x)
+    }
+
+    /// [`Self::evaluate`] where fewer than K usable points lie within `R` of `x`: the weights
+    /// widen to the K nearest ones (found with the k-d tree).
+    fn evaluate_widened<const GRAD: bool>(&self, x: &Point3) -> (f64, Point3) {
+        let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
+        self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
+        let (Some(&(_, d1)), Some(&(_, rho))) = (knn.first(), knn.last()) else {
+            return (0.0, [0.0; 3]);
         };
+        let ids: Vec<u32> = knn
+            .iter()
+            .map(|&(i, _)| self.valid_ids[i as usize])
+            .collect();
+        let local = self.blend_nearest::<GRAD>(x, &ids, rho);
+        self.add_far_field::<GRAD>(x, local, d1, ids[0] as usize)
+    }
+
+    /// The blend of the planes of `ids`, the K nearest usable points of `x` by increasing
+    /// distance (ties by id), `rho` the distance of the last one: weights widened to `ρ(x) = rho`
+    /// (the branch of [`Self::evaluate`] where fewer than K usable points lie within `R`).
+    fn blend_nearest<const GRAD: bool>(&self, x: &Point3, ids: &[u32], rho: f64) -> (f64, Point3) {
+        if rho <= self.radius {
+            // Fewer than K usable points exist at all (tiny clouds): plain blend over R.
+            return self.blend::<GRAD>(x, ids, self.radius, None);
+        }
+        let far = self.points[ids[ids.len() - 1] as usize];
+        let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
+        self.blend::<GRAD>(x, ids, rho, Some(grad_rho))
+    }
+
+    /// `local` (the planes' blend at `x`) with the winding far field where it applies; `d1` is
+    /// the distance from `x` to the nearest usable point, `nearest` its id.
+    fn add_far_field<const GRAD: bool>(
+        &self,
+        x: &Point3,
+        local: (f64, Point3),
+        d1: f64,
+        nearest: usize,
+    ) -> (f64, Point3) {
         match &self.winding {
             Some(w)
                 if d1 > GUARD_FROM.min(FAR_FROM) * self.radius

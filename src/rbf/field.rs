@@ -6,6 +6,7 @@
 //! Implements [`ScalarField`], including the batched [`ScalarField::values_in`] that gathers the
 //! candidate centres once per small box of grid corners.
 
+use super::carrier::NearPoints;
 use super::pou::PouBlock;
 use super::{Carrier, Kernel};
 use crate::geometry::{Aabb, Point3, dist2, sub};
@@ -72,6 +73,53 @@ impl SplineLevel {
     }
 }
 
+/// Candidate centres of one level with their weights as struct of arrays, in the order given
+/// (ascending ids), so a sum over them visits the centres as [`SplineLevel::value_with`] does
+/// while the squared distances vectorise.
+#[derive(Default)]
+struct CentreList {
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    zs: Vec<f64>,
+    ws: Vec<f64>,
+}
+
+impl CentreList {
+    /// The centres `ids` of `level`.
+    fn fill(&mut self, level: &SplineLevel, ids: &[u32]) {
+        for v in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ws] {
+            v.clear();
+        }
+        for &i in ids {
+            let c = level.centres[i as usize];
+            self.xs.push(c[0]);
+            self.ys.push(c[1]);
+            self.zs.push(c[2]);
+            self.ws.push(level.weights[i as usize]);
+        }
+    }
+
+    /// `Σ_i λ_i φ(|x − P_i| / R)` over the listed centres within `support` of `x`: the value
+    /// of [`SplineLevel::value_with`] over the same ids, bit for bit (same arithmetic, same order).
+    fn value(&self, kernel: Kernel, support: f64, x: &Point3, d2: &mut Vec<f64>) -> f64 {
+        d2.clear();
+        d2.extend(
+            (self.xs.iter().zip(&self.ys).zip(&self.zs)).map(|((&px, &py), &pz)| {
+                let (dx, dy, dz) = (x[0] - px, x[1] - py, x[2] - pz);
+                dx * dx + dy * dy + dz * dz
+            }),
+        );
+        let (r2, inv_r) = (support * support, 1.0 / support);
+        let mut s = 0.0;
+        for (&d, &w) in d2.iter().zip(&self.ws) {
+            if d < r2 {
+                s += w * kernel.value(d.sqrt() * inv_r);
+            }
+        }
+        s
+    }
+}
+
 /// `v₀ + v·x` for `[v₀, v_x, v_y, v_z]`, 0 without a polynomial.
 pub fn linear_poly(v: Option<[f64; 4]>, x: &Point3) -> f64 {
     v.map_or(0.0, |v| v[0] + v[1] * x[0] + v[2] * x[1] + v[3] * x[2])
@@ -104,6 +152,7 @@ impl Spline {
     fn add_values_in(&self, kernel: Kernel, region: &Aabb, points: &[Point3], out: &mut [f64]) {
         let (c, half) = (region.center(), 0.5 * region.diagonal());
         let mut hits = Vec::with_capacity(256);
+        let (mut list, mut d2) = (CentreList::default(), Vec::new());
         for (p, o) in points.iter().zip(out.iter_mut()) {
             *o += self.poly_value(p);
         }
@@ -112,8 +161,9 @@ impl Spline {
             // Ascending order: every point then sums its centres in the same order whatever the
             // region (bit-identical values at a corner shared by two tiles or blocks).
             hits.sort_unstable();
+            list.fill(l, &hits);
             for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o += l.value_with(kernel, p, &hits);
+                *o += list.value(kernel, l.support, p, &mut d2);
             }
         }
     }
@@ -231,13 +281,16 @@ impl ScalarField for RbfField {
                 }
             }
         }
-        let mut hits = Vec::with_capacity(256);
-        let (c, half) = (region.center(), 0.5 * region.diagonal());
-        self.carrier_index
-            .within(&c, half + self.carrier_radius, &mut hits);
-        hits.sort_unstable();
+        if let Carrier::Local(l) = &self.carrier {
+            let mut near = NearPoints::new();
+            l.gather(region, &mut near);
+            for (p, o) in points.iter().zip(out.iter_mut()) {
+                *o += l.value_near(p, &mut near);
+            }
+            return;
+        }
         for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o += self.carrier_value(p, &hits);
+            *o += self.carrier.value(p);
         }
     }
 
@@ -250,13 +303,14 @@ impl ScalarField for RbfField {
         };
         let (c, half) = (region.center(), 0.5 * region.diagonal());
         let mut hits = Vec::with_capacity(256);
-        self.carrier_index
-            .within(&c, half + self.carrier_radius, &mut hits);
-        hits.sort_unstable();
+        let mut near = NearPoints::new();
+        if let Carrier::Local(l) = &self.carrier {
+            l.gather(region, &mut near);
+        }
         let poly = spline.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
         for (p, o) in points.iter().zip(out.iter_mut()) {
             let g = match &self.carrier {
-                Carrier::Local(l) => l.value_gradient_with(p, &hits).1,
+                Carrier::Local(l) => l.value_gradient_near(p, &mut near).1,
                 carrier => carrier.gradient(p),
             };
             *o = [0, 1, 2].map(|k| g[k] + poly[k]);

@@ -15,3 +15,4 @@ mod scanner_files;
 mod scanners;
 mod scanners_independent;
 mod skip_test;
+mod tile_evaluation;

@@ -1,0 +1,122 @@
+//! The local carrier evaluated per tile from a gathered list of points (issue 14: no k-d tree
+//! query per grid corner) against the reference path (an index query per point), on fields fitted
+//! to real scans: every corner of a lattice of polygonizer-sized tiles around the data, and points
+//! inside them, get the same value and gradient bit for bit, both where `R` holds at least K
+//! usable points and where the weights widen to the K nearest ones.
+
+use crate::common;
+
+use rbfsurf::geometry::{Aabb, Point3, PointCloud, dist2};
+use rbfsurf::params::ReconParams;
+use rbfsurf::pipeline::fit_field;
+use rbfsurf::progress::NoProgress;
+use rbfsurf::rbf::carrier::{FAR_NEIGHBOURS, LocalCarrier, NearPoints};
+use rbfsurf::rbf::{Carrier, RbfField};
+use rbfsurf::report::Timings;
+
+/// The reference: the points within `R` of `x` from the index, ascending (the order the
+/// polygonizer's sorted candidate lists give).
+fn reference(field: &RbfField, l: &LocalCarrier, x: &Point3) -> (f64, Point3, usize) {
+    let mut hits = Vec::new();
+    field
+        .carrier_index
+        .within(x, field.carrier_radius, &mut hits);
+    hits.sort_unstable();
+    let within = hits
+        .iter()
+        .filter(|&&j| {
+            l.normals()[j as usize] != [0.0; 3]
+                && dist2(*x, l.points()[j as usize]) < field.carrier_radius.powi(2)
+        })
+        .count();
+    let (v, g) = l.value_gradient_with(x, &hits);
+    (v, g, within)
+}
+
+/// Compares every corner of the tiles (edge `tile`) whose centre lies within `reach` of a data
+/// point, plus one point inside each tile and one outside it; returns how many points were
+/// compared and how many of them had fewer than K usable points within `R` and got their K
+/// nearest from the tile's list.
+fn compare_tiles(name: &str, field: &RbfField, tile: f64, reach: f64) -> (usize, usize) {
+    let Carrier::Local(l) = &field.carrier else {
+        panic!("{name}: not a local carrier")
+    };
+    let data = Aabb::from_points(l.points()).inflated(reach);
+    let n = data.extent().map(|e| (e / tile).ceil() as usize);
+    let mut near = NearPoints::new();
+    let (mut compared, mut widened) = (0, 0);
+    let mut nn = Vec::new();
+    for t in 0..n[0] * n[1] * n[2] {
+        let t3 = [t % n[0], (t / n[0]) % n[1], t / (n[0] * n[1])];
+        let min: Point3 = [0, 1, 2].map(|a| data.min[a] + t3[a] as f64 * tile);
+        let region = Aabb {
+            min,
+            max: min.map(|v| v + tile),
+        };
+        field.carrier_index.nearest_k(&region.center(), 1, &mut nn);
+        if nn[0].1 > reach {
+            continue;
+        }
+        l.gather(&region, &mut near);
+        let mut points: Vec<Point3> = (0..125)
+            .map(|c| {
+                let c3 = [c % 5, (c / 5) % 5, c / 25];
+                [0, 1, 2].map(|a| min[a] + c3[a] as f64 * tile / 4.0)
+            })
+            .collect();
+        points.push([0, 1, 2].map(|a| min[a] + tile * [0.31, 0.77, 0.52][a]));
+        // Outside the region: served by the index queries.
+        points.push([0, 1, 2].map(|a| min[a] + tile * [1.6, -0.3, 0.5][a]));
+        for x in &points {
+            let (v, g, within) = reference(field, l, x);
+            let fast = l.value_gradient_near(x, &mut near);
+            let value = l.value_near(x, &mut near);
+            assert_eq!(
+                (v.to_bits(), g.map(f64::to_bits)),
+                (fast.0.to_bits(), fast.1.map(f64::to_bits)),
+                "{name}: at {x:?} (tile {region:?}): {v} {g:?} vs {fast:?}"
+            );
+            assert_eq!(value.to_bits(), v.to_bits(), "{name}: value at {x:?}");
+            compared += 1;
+            widened += usize::from(within < FAR_NEIGHBOURS && near.serves_nearest());
+        }
+    }
+    (compared, widened)
+}
+
+#[test]
+fn tile_lists_give_the_index_queries_values_bit_for_bit_on_real_scans() {
+    let kitten =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
+    let bunny =
+        rbfsurf::io::read_point_cloud(&common::data("bunny_cgal_10k.ply"), &Default::default())
+            .unwrap();
+    let bare = PointCloud {
+        normals: None,
+        ..kitten.clone()
+    };
+    for (name, cloud) in [
+        ("kitten", &kitten),
+        ("kitten without normals", &bare),
+        ("bunny 10k", &bunny),
+    ] {
+        let fit = fit_field(
+            cloud,
+            &ReconParams::default(),
+            &NoProgress,
+            &mut Timings::default(),
+        )
+        .unwrap();
+        let field = fit.rbf.as_ref().unwrap();
+        let r = fit.support_radius;
+        // Tiles as the polygonizer's (4 cells of about R / 3.75), out to twice R from the data
+        // where the far field takes over, and a few larger ones.
+        for (tile, reach) in [(4.0 * r / 3.75, 2.0 * r), (3.0 * r, 1.5 * r)] {
+            let (compared, widened) = compare_tiles(name, field, tile, reach);
+            assert!(
+                compared > 1000 && widened > compared / 5 && widened < compared,
+                "{name}: {compared} points compared, {widened} with fewer than K within R"
+            );
+        }
+    }
+}
