@@ -229,6 +229,9 @@ const FAR_FROM: f64 = 0.5;
 /// that disagree with it (see [`LocalCarrier`]'s far field), and the width of that hand-over.
 const GUARD_FROM: f64 = 0.25;
 const GUARD_WIDTH: f64 = 0.5;
+/// `|1 − 2w|` below which the guard is off and above which it is fully on (`w` within 0.2 /
+/// 0.05 of 0 or 1).
+const GUARD_DECIDED: (f64, f64) = (0.6, 0.9);
 /// Disagreement `−g (1 − 2w)` (normalised units, in support radii) at which the guard is fully on.
 const GUARD_SCALE: f64 = 0.125;
 
@@ -691,11 +694,12 @@ impl LocalCarrier {
     /// (`|1 − 2w| ≤ 0.2`: beside an open sheet, across a wide hole), where the tangent planes keep
     /// deciding as before.
     /// - `τ_far = s((d₁ − R/2)/R) · c`: off the data the winding number decides.
-    /// - `τ_guard = s((d₁ − R/4)/(R/2)) · c · D`: nearer the data, only where the planes and the
+    /// - `τ_guard = s((d₁ − R/4)/(R/2)) · c_g · D`: nearer the data, only where the planes and the
     ///   winding number disagree about the side (`D = s(−g_local (1 − 2w) / (R/8))`, 0 where they
     ///   agree). Between limbs closer than about `2R` and in concavities, the planes of the limb's far
     ///   side or of the curved part outvote the near ones and leave a stray sheet of the carrier there
-    ///   (a handle); the winding number of all the oriented points knows the side. Where the two agree
+    ///   (a handle); the winding number of all the oriented points knows the side. `c_g` asks `w`
+    ///   to be within 0.05 of 0 or 1 (beside an open sheet it is 0.2–0.5). Where the two agree
     ///   (every sample of a clean closed surface near the data) nothing changes.
     ///
     /// `s` is the C¹ smoothstep. The data points themselves (`d₁ = 0`) see only the planes, so the
@@ -715,6 +719,12 @@ impl LocalCarrier {
         let a = 1.0 - 2.0 * wv;
         let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
         let dc_dw = dc / 0.4 * -2.0 * a.signum();
+        // The guard asks more of the winding number: `w` within 0.05 of 0 or 1 (beside an open
+        // sheet, e.g. under a single range image near its rim, `w` is 0.2–0.5 and the planes
+        // keep deciding: the sheet stays open).
+        let (cg, dcg) =
+            smoothstep((a.abs() - GUARD_DECIDED.0) / (GUARD_DECIDED.1 - GUARD_DECIDED.0));
+        let dcg_dw = dcg / (GUARD_DECIDED.1 - GUARD_DECIDED.0) * -2.0 * a.signum();
         let delta = GUARD_SCALE * r;
         let (dis, ddis) = smoothstep(-gl * a / delta);
         // ±d₁ where decided: distance-like (slope about 1) so the polygonizer's skip test still
@@ -722,7 +732,7 @@ impl LocalCarrier {
         let gf = d1 * a;
         let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
         let tau_far = s1 * c;
-        let tau_guard = s2 * c * dis;
+        let tau_guard = s2 * cg * dis;
         let tau = 1.0 - (1.0 - tau_far) * (1.0 - tau_guard);
         let g = (1.0 - tau) * gl + tau * gf;
         if !GRAD {
@@ -732,9 +742,9 @@ impl LocalCarrier {
             let da = -2.0 * wg[k];
             let dt_far = ds1 / r * dd1[k] * c + s1 * dc_dw * wg[k];
             let ddis_k = ddis / delta * -(dl[k] * a + gl * da);
-            let dt_guard = ds2 / (GUARD_WIDTH * r) * dd1[k] * c * dis
-                + s2 * dc_dw * wg[k] * dis
-                + s2 * c * ddis_k;
+            let dt_guard = ds2 / (GUARD_WIDTH * r) * dd1[k] * cg * dis
+                + s2 * dcg_dw * wg[k] * dis
+                + s2 * cg * ddis_k;
             let dtau = (1.0 - tau_guard) * dt_far + (1.0 - tau_far) * dt_guard;
             let dgf = d1 * da + a * dd1[k];
             (1.0 - tau) * dl[k] + tau * dgf + (gf - gl) * dtau
