@@ -10,6 +10,8 @@
 #![warn(missing_docs)]
 
 pub mod clean;
+#[cfg(feature = "nats")]
+pub mod dist;
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod error;
