@@ -4,6 +4,7 @@
 
 use super::DistError;
 use async_nats::jetstream::{self, consumer, kv, object_store, stream};
+
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -117,18 +118,27 @@ pub async fn open(client: async_nats::Client) -> Result<Resources, DistError> {
     })
     .await
     .map_err(DistError::nats("task stream"))?;
-    let jobs = match js.get_key_value(JOB_BUCKET).await {
-        Ok(kv) => kv,
-        Err(_) => js
-            .create_key_value(kv::Config {
-                bucket: JOB_BUCKET.to_string(),
-                history: 1,
-                storage: stream::StorageType::File,
-                ..Default::default()
-            })
-            .await
-            .map_err(DistError::nats("job bucket"))?,
-    };
+    // The bucket's stream as the client's `create_key_value` makes it, created directly: that
+    // call first asks for the account's limits in a form nats-server 2.9 does not answer.
+    js.get_or_create_stream(stream::Config {
+        name: format!("KV_{JOB_BUCKET}"),
+        subjects: vec![format!("$KV.{JOB_BUCKET}.>")],
+        max_messages_per_subject: 1,
+        storage: stream::StorageType::File,
+        allow_rollup: true,
+        deny_delete: true,
+        allow_direct: true,
+        discard: stream::DiscardPolicy::New,
+        duplicate_window: Duration::from_secs(120),
+        num_replicas: 1,
+        ..Default::default()
+    })
+    .await
+    .map_err(DistError::nats("job bucket"))?;
+    let jobs = js
+        .get_key_value(JOB_BUCKET)
+        .await
+        .map_err(DistError::nats("job bucket"))?;
     let objects = match js.get_object_store(OBJECT_BUCKET).await {
         Ok(os) => os,
         Err(_) => js

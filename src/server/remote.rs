@@ -92,6 +92,11 @@ impl JobManager {
         Arc::clone(job)
     }
 
+    /// Whether jobs run on a backend (`serve --nats`) rather than in this process.
+    pub fn is_remote(&self) -> bool {
+        self.backend.is_some()
+    }
+
     /// Forgets job `id` (its record is gone) and its cached files.
     pub fn forget(&self, id: Uuid) {
         write(&self.jobs).remove(&id);

@@ -10,7 +10,7 @@ mod harness;
 use harness::*;
 use std::path::Path;
 
-/// A budget that sends the 30,000-point torus out of core in about ten blocks.
+/// A budget that sends the 30,000-point torus out of core (32 blocks of ~1,000 points).
 const OUT_OF_CORE_MIB: &str = "110";
 
 /// Mesh files decoded: the same triangles over the same vertex positions, bit for bit.
@@ -36,6 +36,8 @@ fn torus_and_local_run(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
         dir.join("local.json").to_str().unwrap(),
         "--max-memory-mib",
         OUT_OF_CORE_MIB,
+        "--resolution",
+        "64",
     ]);
     let rep = report(&dir.join("local.json"));
     let blocks = rep["blocks"].as_array().map_or(0, |b| b.len());
@@ -62,7 +64,7 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
 
     // Out of core: the task graph on two workers gives the local run's mesh.
     let (out, rep_path) = (dir.join("dist.glb"), dir.join("dist.json"));
-    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB]);
+    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"]);
     finish_submit(job);
     assert_same_mesh(&out, &local);
     let (rep, lrep) = (report(&rep_path), report(&dir.join("local.json")));
@@ -130,7 +132,7 @@ fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
     let (_api, a) = serve(&nats, dir, "api");
     let (cloud, local) = torus_and_local_run(dir);
     let (out, rep_path) = (dir.join("dist.glb"), dir.join("dist.json"));
-    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB]);
+    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"]);
 
     // kill -9 the worker that took the start task (reading and preparing take seconds).
     let mut victim = None;
