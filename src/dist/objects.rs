@@ -8,13 +8,14 @@
 use super::DistError;
 use async_nats::jetstream::object_store::{self, ObjectStore};
 use crate::pipeline::tiled::store::{RemoteStore, StoreError};
-use futures_util::StreamExt;
 use std::time::Duration;
 use tokio::io::AsyncReadExt;
 use uuid::Uuid;
 
 /// Attempts of one operation (one second apart).
 const ATTEMPTS: u32 = 60;
+/// Longest wait for one attempt (a request lost in a restart never answers).
+const ATTEMPT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// The object name of `key` of job `job`.
 pub fn name(job: Uuid, key: &str) -> String {
@@ -30,7 +31,10 @@ where
 {
     let mut last = String::new();
     for attempt in 0..ATTEMPTS {
-        match op().await {
+        let outcome = tokio::time::timeout(ATTEMPT_TIMEOUT, op())
+            .await
+            .unwrap_or_else(|_| Err((true, "no answer in time".to_string())));
+        match outcome {
             Ok(v) => return Ok(v),
             Err((false, m)) => {
                 return Err(DistError::Nats {
@@ -81,29 +85,27 @@ pub async fn get(os: &ObjectStore, name: &str) -> Result<Vec<u8>, DistError> {
     .await
 }
 
-/// The names under `<job>/<prefix>`.
-pub async fn list(os: &ObjectStore, job: Uuid, prefix: &str) -> Result<Vec<String>, DistError> {
-    let start = name(job, prefix);
-    retry("list objects", || async {
-        let mut list = os.list().await.map_err(|e| (true, e.to_string()))?;
-        let mut out = Vec::new();
-        while let Some(info) = list.next().await {
-            let info = info.map_err(|e| (true, e.to_string()))?;
-            if info.name.starts_with(&start) && !info.deleted {
-                out.push(info.name);
-            }
-        }
-        Ok(out)
-    })
-    .await
+/// Deletes the objects `keys` of job `job` (missing ones are fine). Names are always known
+/// (from the record and the graph state): listing a bucket that other jobs are writing is
+/// avoided.
+pub async fn delete(os: &ObjectStore, job: Uuid, keys: &[String]) {
+    for k in keys {
+        let n = name(job, k);
+        let _ = tokio::time::timeout(ATTEMPT_TIMEOUT, os.delete(&n)).await;
+    }
 }
 
-/// Deletes every object of job `job` under `prefix` (`""`: all of them).
-pub async fn delete_all(os: &ObjectStore, job: Uuid, prefix: &str) -> Result<(), DistError> {
-    for n in list(os, job, prefix).await? {
-        let _ = os.delete(&n).await;
+/// The keys of the task graph's intermediate values of a graph with `blocks` blocks and
+/// `regions` regions.
+pub fn intermediates(blocks: usize, regions: usize) -> Vec<String> {
+    let mut keys = vec!["plan".to_string()];
+    for b in 0..blocks {
+        keys.extend(["points", "spline", "block"].map(|k| format!("{k}/{b}")));
     }
-    Ok(())
+    for r in 0..regions {
+        keys.extend(["piece", "region"].map(|k| format!("{k}/{r}")));
+    }
+    keys
 }
 
 /// The object store as the task graph's [`RemoteStore`] for one job, from a blocking thread.

@@ -25,6 +25,9 @@ pub struct JobRecord {
     pub max_bytes: u64,
     /// Set by a DELETE: workers stop the job at their next check.
     pub cancel: bool,
+    /// Files of the results (`result/<file>` in the object store), set when the job succeeds.
+    #[serde(default)]
+    pub results: Vec<String>,
 }
 
 /// The task graph's progress in `dag.<id>`.

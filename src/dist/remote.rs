@@ -7,7 +7,7 @@
 use super::connect::{self, NatsConfig, Resources};
 use super::objects;
 use super::queue::{self, Task, TaskKind};
-use super::records::{self, JobRecord, job_key};
+use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::DistError;
 use crate::params::ReconOptions;
 use crate::server::config::ServerConfig;
@@ -51,6 +51,7 @@ impl JobBackend for NatsJobs {
             max_points: cfg.max_points,
             max_bytes: cfg.max_upload_bytes,
             cancel: false,
+            results: Vec::new(),
         };
         let job = view.id;
         self.rt
@@ -95,9 +96,17 @@ impl JobBackend for NatsJobs {
     fn delete(&self, id: Uuid) -> std::io::Result<()> {
         self.rt
             .block_on(async {
-                objects::delete_all(&self.res.objects, id, "").await?;
-                for key in [job_key(id), records::dag_key(id)] {
-                    let _ = self.res.jobs.delete(&key).await;
+                let (os, kv) = (&self.res.objects, &self.res.jobs);
+                if let Some((d, _)) = records::load::<DagState>(kv, &dag_key(id)).await? {
+                    objects::delete(os, id, &objects::intermediates(d.blocks.len(), d.regions.len())).await;
+                }
+                if let Some((r, _)) = records::load::<JobRecord>(kv, &job_key(id)).await? {
+                    let mut keys: Vec<String> = (r.results.iter()).map(|f| format!("result/{f}")).collect();
+                    keys.push(r.view.input.file.clone());
+                    objects::delete(os, id, &keys).await;
+                }
+                for key in [job_key(id), dag_key(id)] {
+                    let _ = kv.delete(&key).await;
                 }
                 Ok::<(), DistError>(())
             })
@@ -141,7 +150,7 @@ async fn apply(backend: &NatsJobs, mgr: &Arc<JobManager>, key: &str, op: Operati
     };
     let view = rec.view;
     if view.status == JobStatus::Succeeded
-        && let Err(e) = fetch_results(backend, mgr, id).await
+        && let Err(e) = fetch_results(backend, mgr, id, &rec.results).await
     {
         tracing::warn!(%id, error = %e, "cannot copy the job's results; it shows as running until they can be copied");
         return;
@@ -151,24 +160,28 @@ async fn apply(backend: &NatsJobs, mgr: &Arc<JobManager>, key: &str, op: Operati
 }
 
 /// Copies `result/*` of job `id` into its directory of the data dir (once).
-async fn fetch_results(backend: &NatsJobs, mgr: &JobManager, id: Uuid) -> Result<(), DistError> {
+async fn fetch_results(
+    backend: &NatsJobs,
+    mgr: &JobManager,
+    id: Uuid,
+    files: &[String],
+) -> Result<(), DistError> {
     let dir = mgr.store().dir(id);
     if dir.join("report.json").exists() {
         return Ok(());
     }
-    let prefix = objects::name(id, "result/");
-    let mut names = objects::list(&backend.res.objects, id, "result/").await?;
+    let mut files = files.to_vec();
     // The report last: its presence says the copy is complete.
-    names.sort_by_key(|n| n.ends_with("/report.json"));
+    files.sort_by_key(|f| f == "report.json");
     let d = dir.clone();
     tokio::task::spawn_blocking(move || std::fs::create_dir_all(d))
         .await
         .map_err(DistError::nats("cache"))?
         .map_err(DistError::nats("cache"))?;
-    for name in names {
+    for file in files {
+        let name = objects::name(id, &format!("result/{file}"));
         let bytes = objects::get(&backend.res.objects, &name).await?;
-        let file = name.trim_start_matches(&prefix).replace('/', "_");
-        let path = dir.join(&file);
+        let path = dir.join(file.replace('/', "_"));
         let write = tokio::task::spawn_blocking(move || crate::io::write_atomic(&path, &bytes));
         write
             .await

@@ -259,32 +259,57 @@ fn whole(
         job_memory_mib: None,
     };
     let summary = run(source, params, limits, &output, progress).map_err(run_error)?;
-    upload_results(ctx, rec.view.id, dir.path())?;
-    finish_job(ctx, rec.view.id, JobStatus::Succeeded, None, Some(summary.triangles))
+    let results = upload_results(ctx, rec.view.id, dir.path())?;
+    let done = Outcome::Succeeded {
+        triangles: summary.triangles,
+        results,
+    };
+    finish_job(ctx, rec.view.id, done)
 }
 
-/// Uploads every file of `dir` as `result/<file>`.
-fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<(), TaskError> {
+/// Uploads every file of `dir` as `result/<file>`; returns the file names.
+fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<Vec<String>, TaskError> {
     let entries = std::fs::read_dir(dir).map_err(|e| TaskError::Retry(e.to_string()))?;
+    let mut files = Vec::new();
     for entry in entries.flatten() {
         let file = entry.file_name().to_string_lossy().to_string();
         let bytes = std::fs::read(entry.path()).map_err(|e| TaskError::Retry(e.to_string()))?;
         let name = objects::name(job, &format!("result/{file}"));
         ctx.block_on(objects::put(&ctx.res.objects, &name, &bytes))?;
+        files.push(file);
     }
-    Ok(())
+    Ok(files)
+}
+
+/// How a job ends.
+pub enum Outcome {
+    /// With a mesh of this many triangles and these result files.
+    Succeeded {
+        /// Triangles of the mesh.
+        triangles: usize,
+        /// Files under `result/`.
+        results: Vec<String>,
+    },
+    /// With this error.
+    Failed(ErrorBody),
 }
 
 /// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`) and
 /// drops its intermediate values.
-pub fn finish_job(
-    ctx: &Ctx,
-    job: Uuid,
-    status: JobStatus,
-    error: Option<ErrorBody>,
-    triangles: Option<usize>,
-) -> Result<(), TaskError> {
+pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskError> {
+    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
+    if let Some((d, _)) = dag {
+        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
+        ctx.block_on(objects::delete(&ctx.res.objects, job, &keys));
+    }
+    let (status, error, triangles, results) = match outcome {
+        Outcome::Succeeded { triangles, results } => {
+            (JobStatus::Succeeded, None, Some(triangles), results)
+        }
+        Outcome::Failed(e) => (JobStatus::Failed, Some(e), None, Vec::new()),
+    };
     ctx.update_job(job, |r| {
+        r.results = results.clone();
         let (status, error, triangles) = if r.cancel {
             let e = ErrorBody {
                 code: "cancelled".into(),
@@ -302,11 +327,7 @@ pub fn finish_job(
             r.view.progress = 1.0;
             r.view.stage_progress = 1.0;
         }
-    })?;
-    for prefix in ["plan", "points/", "spline/", "block/", "piece/", "region/"] {
-        let _ = ctx.block_on(objects::delete_all(&ctx.res.objects, job, prefix));
-    }
-    Ok(())
+    })
 }
 
 fn prepare_graph(
@@ -458,6 +479,7 @@ fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskErr
     let json = serde_json::to_vec_pretty(&recon.report).unwrap_or_default();
     crate::io::write_atomic(&dir.path().join("report.json"), &json)
         .map_err(|e| run_error(RunError::Write(e)))?;
-    upload_results(ctx, job, dir.path())?;
-    finish_job(ctx, job, JobStatus::Succeeded, None, Some(recon.mesh.triangles.len()))
+    let results = upload_results(ctx, job, dir.path())?;
+    let triangles = recon.mesh.triangles.len();
+    finish_job(ctx, job, Outcome::Succeeded { triangles, results })
 }

@@ -11,7 +11,6 @@ use super::queue::{Task, TaskKind};
 use super::records::{self, JobRecord, job_key};
 use super::steps::{self, Ctx, TaskError, TaskProgress};
 use super::DistError;
-use crate::server::model::JobStatus;
 use async_nats::jetstream::{AckKind, Message};
 use futures_util::StreamExt;
 use std::sync::Arc;
@@ -142,7 +141,7 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
 async fn fail(ctx: &Arc<Ctx>, task: Task, body: crate::server::error::ErrorBody) {
     let ctx = Arc::clone(ctx);
     let _ = tokio::task::spawn_blocking(move || {
-        steps::finish_job(&ctx, task.job, JobStatus::Failed, Some(body), None)
+        steps::finish_job(&ctx, task.job, steps::Outcome::Failed(body))
     })
     .await;
 }

@@ -204,6 +204,7 @@ pub fn submit(base: &str, cloud: &Path, out: &Path, report: &Path, extra: &[&str
         .arg(out)
         .arg("--report")
         .arg(report)
+        .args(["--timeout-s", "300"])
         .args(extra)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
