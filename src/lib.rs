@@ -10,10 +10,10 @@
 #![warn(missing_docs)]
 
 pub mod clean;
-#[cfg(feature = "nats")]
-pub mod dist;
 #[cfg(feature = "cli")]
 pub mod cli;
+#[cfg(feature = "nats")]
+pub mod dist;
 pub mod error;
 pub mod frep;
 pub mod geometry;

@@ -41,7 +41,8 @@ pub struct NatsArgs {
 }
 
 fn first_line(path: &PathBuf, what: &str) -> Result<String> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{what} {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("{what} {}", path.display()))?;
     let line = text.lines().next().unwrap_or("").trim().to_string();
     if line.is_empty() {
         bail!("{what} {}: the file is empty", path.display());
@@ -50,7 +51,10 @@ fn first_line(path: &PathBuf, what: &str) -> Result<String> {
 }
 
 fn env(name: &str) -> Option<String> {
-    std::env::var(name).ok().map(|v| v.trim().to_string()).filter(|v| !v.is_empty())
+    std::env::var(name)
+        .ok()
+        .map(|v| v.trim().to_string())
+        .filter(|v| !v.is_empty())
 }
 
 impl NatsArgs {

@@ -59,7 +59,9 @@ impl std::fmt::Debug for NatsConfig {
 pub fn redact_url(url: &str) -> String {
     url.split(',')
         .map(|u| match (u.find("://"), u.rfind('@')) {
-            (Some(s), Some(at)) if at > s => format!("{}://<credentials>@{}", &u[..s], &u[at + 1..]),
+            (Some(s), Some(at)) if at > s => {
+                format!("{}://<credentials>@{}", &u[..s], &u[at + 1..])
+            }
             _ => u.to_string(),
         })
         .collect::<Vec<_>>()

@@ -6,8 +6,8 @@
 //! except a read of a name that does not exist.
 
 use super::DistError;
-use async_nats::jetstream::object_store::{self, ObjectStore};
 use crate::pipeline::tiled::store::{RemoteStore, StoreError};
+use async_nats::jetstream::object_store::{self, ObjectStore};
 use std::time::Duration;
 use tokio::io::AsyncReadExt;
 use uuid::Uuid;

@@ -4,11 +4,11 @@
 //! feeds the node's [`JobManager`]. A job's results are copied into the data directory before
 //! the node shows it succeeded, so whoever sees `succeeded` can download them.
 
+use super::DistError;
 use super::connect::{self, NatsConfig, Resources};
 use super::objects;
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DagState, JobRecord, dag_key, job_key};
-use super::DistError;
 use crate::params::ReconOptions;
 use crate::server::config::ServerConfig;
 use crate::server::error::ErrorBody;
@@ -56,8 +56,12 @@ impl JobBackend for NatsJobs {
         let job = view.id;
         self.rt
             .block_on(async {
-                objects::put(&self.res.objects, &objects::name(job, &view.input.file), input)
-                    .await?;
+                objects::put(
+                    &self.res.objects,
+                    &objects::name(job, &view.input.file),
+                    input,
+                )
+                .await?;
                 records::create(&self.res.jobs, &job_key(job), &record).await?;
                 let start = Task {
                     job,
@@ -98,10 +102,16 @@ impl JobBackend for NatsJobs {
             .block_on(async {
                 let (os, kv) = (&self.res.objects, &self.res.jobs);
                 if let Some((d, _)) = records::load::<DagState>(kv, &dag_key(id)).await? {
-                    objects::delete(os, id, &objects::intermediates(d.blocks.len(), d.regions.len())).await;
+                    objects::delete(
+                        os,
+                        id,
+                        &objects::intermediates(d.blocks.len(), d.regions.len()),
+                    )
+                    .await;
                 }
                 if let Some((r, _)) = records::load::<JobRecord>(kv, &job_key(id)).await? {
-                    let mut keys: Vec<String> = (r.results.iter()).map(|f| format!("result/{f}")).collect();
+                    let mut keys: Vec<String> =
+                        (r.results.iter()).map(|f| format!("result/{f}")).collect();
                     keys.push(r.view.input.file.clone());
                     objects::delete(os, id, &keys).await;
                 }
@@ -136,7 +146,10 @@ pub async fn mirror(backend: Arc<NatsJobs>, mgr: Arc<JobManager>) {
 }
 
 async fn apply(backend: &NatsJobs, mgr: &Arc<JobManager>, key: &str, op: Operation, value: &[u8]) {
-    let Some(id) = key.strip_prefix("job.").and_then(|s| Uuid::parse_str(s).ok()) else {
+    let Some(id) = key
+        .strip_prefix("job.")
+        .and_then(|s| Uuid::parse_str(s).ok())
+    else {
         return;
     };
     if op != Operation::Put {
@@ -195,7 +208,9 @@ async fn fetch_results(
 pub async fn serve_nats(cfg: ServerConfig, nats: NatsConfig) -> std::io::Result<()> {
     let listener = tokio::net::TcpListener::bind(cfg.addr).await?;
     tracing::info!(nats = %connect::redact_url(&nats.url), "connecting to NATS");
-    let backend = connect_backend(&nats).await.map_err(std::io::Error::other)?;
+    let backend = connect_backend(&nats)
+        .await
+        .map_err(std::io::Error::other)?;
     let permits = (2 * cfg.workers).max(2);
     let mgr = {
         let b: Arc<dyn JobBackend> = backend.clone();

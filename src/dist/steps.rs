@@ -68,7 +68,12 @@ pub struct Ctx {
 
 impl Ctx {
     /// A context over `res`.
-    pub fn new(res: Resources, rt: tokio::runtime::Handle, worker: String, concurrency: usize) -> Ctx {
+    pub fn new(
+        res: Resources,
+        rt: tokio::runtime::Handle,
+        worker: String,
+        concurrency: usize,
+    ) -> Ctx {
         Ctx {
             res,
             rt,
@@ -96,15 +101,23 @@ impl Ctx {
     }
 
     /// Changes job `job`'s record (compare-and-set) unless it is terminal.
-    pub fn update_job(&self, job: Uuid, mut f: impl FnMut(&mut JobRecord)) -> Result<(), TaskError> {
-        self.block_on(records::update::<JobRecord, _>(&self.res.jobs, &job_key(job), |r| {
-            if r.view.status.is_terminal() {
-                return false;
-            }
-            let before = serde_json::to_vec(&r.view).unwrap_or_default();
-            f(r);
-            serde_json::to_vec(&r.view).unwrap_or_default() != before
-        }))?;
+    pub fn update_job(
+        &self,
+        job: Uuid,
+        mut f: impl FnMut(&mut JobRecord),
+    ) -> Result<(), TaskError> {
+        self.block_on(records::update::<JobRecord, _>(
+            &self.res.jobs,
+            &job_key(job),
+            |r| {
+                if r.view.status.is_terminal() {
+                    return false;
+                }
+                let before = serde_json::to_vec(&r.view).unwrap_or_default();
+                f(r);
+                serde_json::to_vec(&r.view).unwrap_or_default() != before
+            },
+        ))?;
         Ok(())
     }
 
@@ -116,7 +129,8 @@ impl Ctx {
         drop(plans);
         let name = objects::name(job, "plan");
         let bytes = self.block_on(objects::get(&self.res.objects, &name))?;
-        let plan = Plan::decode(&bytes, &name, params).map_err(|e| TaskError::Retry(e.to_string()))?;
+        let plan =
+            Plan::decode(&bytes, &name, params).map_err(|e| TaskError::Retry(e.to_string()))?;
         let plan = Arc::new(plan);
         plans = self.plans.lock().unwrap_or_else(|e| e.into_inner());
         plans.push_front((job, Arc::clone(&plan)));
@@ -149,7 +163,8 @@ impl Progress for TaskProgress {
         self.fraction.store(0f64.to_bits(), Ordering::Relaxed);
     }
     fn fraction(&self, done: f64) {
-        self.fraction.store(done.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
+        self.fraction
+            .store(done.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
     }
     fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)
@@ -193,27 +208,50 @@ fn start(
             r.view.stage = Some(Stage::Read.name().into());
         }
     })?;
-    if [crate::server::volume::COMPOSITION, crate::server::volume::MORPH]
-        .contains(&rec.view.input.format.as_str())
+    if [
+        crate::server::volume::COMPOSITION,
+        crate::server::volume::MORPH,
+    ]
+    .contains(&rec.view.input.format.as_str())
     {
         return Err(TaskError::Job(ErrorBody {
             code: ErrorKind::BadParameter.code().into(),
-            message: "composition and morph jobs run on the embedded service (serve without --nats)".into(),
+            message:
+                "composition and morph jobs run on the embedded service (serve without --nats)"
+                    .into(),
         }));
     }
-    let data = ctx.block_on(objects::get(&ctx.res.objects, &objects::name(job, &rec.view.input.file)))?;
-    let format = PointFormat::from_path(std::path::Path::new(&rec.view.input.file))
-        .ok_or_else(|| TaskError::Job(crate::server::error::internal_body("stored input has an unknown extension")))?;
+    let data = ctx.block_on(objects::get(
+        &ctx.res.objects,
+        &objects::name(job, &rec.view.input.file),
+    ))?;
+    let format =
+        PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
+            TaskError::Job(crate::server::error::internal_body(
+                "stored input has an unknown extension",
+            ))
+        })?;
     let limits = ReadLimits {
         max_points: rec.max_points,
         max_bytes: rec.max_bytes,
         max_memory_mib: params.max_memory_mib,
     };
-    let cloud = crate::io::parse_point_cloud(&data, format, &limits).map_err(|e| run_error(RunError::Read(e)))?;
+    let cloud = crate::io::parse_point_cloud(&data, format, &limits)
+        .map_err(|e| run_error(RunError::Read(e)))?;
     match plan_execution(cloud.points.len() as u64, params).map_err(recon_error)? {
         Execution::InMemory => {
             drop(cloud);
-            whole(ctx, rec, params, PointSource::Bytes { data: &data, format }, &limits, progress)
+            whole(
+                ctx,
+                rec,
+                params,
+                PointSource::Bytes {
+                    data: &data,
+                    format,
+                },
+                &limits,
+                progress,
+            )
         }
         Execution::OutOfCore(_) => {
             drop(data);
@@ -225,9 +263,10 @@ fn start(
 /// The error of a failed run as the job's error (as the embedded service words it).
 fn run_error(e: RunError) -> TaskError {
     match e {
-        RunError::Reconstruct { source: ReconError::Tiled(TiledError::Store(s)), .. } => {
-            TaskError::Retry(s.to_string())
-        }
+        RunError::Reconstruct {
+            source: ReconError::Tiled(TiledError::Store(s)),
+            ..
+        } => TaskError::Retry(s.to_string()),
         e @ (RunError::Read(_) | RunError::Write(_)) if e.kind() == ErrorKind::Internal => {
             TaskError::Job(crate::server::error::internal_body(&e.to_string()))
         }
@@ -357,7 +396,11 @@ fn prepare_graph(
     let plan = prepare::prepare(cloud, params, &options, est.block_points, &store, progress)
         .map_err(recon_error)?;
     let blob = plan.encode();
-    ctx.block_on(objects::put(&ctx.res.objects, &objects::name(job, "plan"), &blob))?;
+    ctx.block_on(objects::put(
+        &ctx.res.objects,
+        &objects::name(job, "plan"),
+        &blob,
+    ))?;
     let dag = DagState {
         blocks: vec![false; plan.blocks.len()],
         regions: vec![false; plan.grid.regions.len()],
@@ -367,7 +410,10 @@ fn prepare_graph(
     ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
     ctx.update_job(job, |r| set_stage(r, Stage::Blocks, 0.0))?;
     let tasks: Vec<Task> = (0..plan.blocks.len())
-        .map(|b| Task { job, kind: TaskKind::Block(b) })
+        .map(|b| Task {
+            job,
+            kind: TaskKind::Block(b),
+        })
         .collect();
     ctx.block_on(queue::publish(&ctx.res.js, &tasks))?;
     Ok(())
@@ -389,23 +435,37 @@ fn now_ms() -> u64 {
 
 /// Marks item `k` of the phase done; returns (done, total) after the update.
 fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, usize), TaskError> {
-    let dag = ctx.block_on(records::update::<DagState, _>(&ctx.res.jobs, &dag_key(job), |d| {
-        let flags = if regions { &mut d.regions } else { &mut d.blocks };
-        if k >= flags.len() || flags[k] {
-            return false;
-        }
-        flags[k] = true;
-        if !regions && d.blocks.iter().all(|&x| x) {
-            d.regions_started_ms = now_ms();
-        }
-        true
-    }))?;
+    let dag = ctx.block_on(records::update::<DagState, _>(
+        &ctx.res.jobs,
+        &dag_key(job),
+        |d| {
+            let flags = if regions {
+                &mut d.regions
+            } else {
+                &mut d.blocks
+            };
+            if k >= flags.len() || flags[k] {
+                return false;
+            }
+            flags[k] = true;
+            if !regions && d.blocks.iter().all(|&x| x) {
+                d.regions_started_ms = now_ms();
+            }
+            true
+        },
+    ))?;
     let dag = dag.ok_or_else(|| TaskError::Retry(format!("job {job}: no graph state")))?;
     let flags = if regions { &dag.regions } else { &dag.blocks };
     Ok((flags.iter().filter(|&&x| x).count(), flags.len()))
 }
 
-fn block(ctx: &Ctx, job: Uuid, params: &ReconParams, b: usize, progress: &TaskProgress) -> Result<(), TaskError> {
+fn block(
+    ctx: &Ctx,
+    job: Uuid,
+    params: &ReconParams,
+    b: usize,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
     let plan = ctx.plan(job, params)?;
     let store = ctx.store(job);
     let outcome = graph::fit_step(&plan, &store, b, &ctx.worker, progress).map_err(recon_error)?;
@@ -413,27 +473,50 @@ fn block(ctx: &Ctx, job: Uuid, params: &ReconParams, b: usize, progress: &TaskPr
     ctx.block_on(objects::put(&ctx.res.objects, &name, &outcome.encode()))?;
     let (done, total) = mark_done(ctx, job, b, false)?;
     if done < total {
-        return ctx.update_job(job, |r| set_stage(r, Stage::Blocks, done as f64 / total as f64));
+        return ctx.update_job(job, |r| {
+            set_stage(r, Stage::Blocks, done as f64 / total as f64)
+        });
     }
     ctx.update_job(job, |r| set_stage(r, Stage::Polygonize, 0.0))?;
     let tasks: Vec<Task> = (0..plan.grid.regions.len())
-        .map(|r| Task { job, kind: TaskKind::Region(r) })
+        .map(|r| Task {
+            job,
+            kind: TaskKind::Region(r),
+        })
         .collect();
     Ok(ctx.block_on(queue::publish(&ctx.res.js, &tasks))?)
 }
 
-fn region(ctx: &Ctx, job: Uuid, params: &ReconParams, r: usize, progress: &TaskProgress) -> Result<(), TaskError> {
+fn region(
+    ctx: &Ctx,
+    job: Uuid,
+    params: &ReconParams,
+    r: usize,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
     let plan = ctx.plan(job, params)?;
     let store = ctx.store(job);
     let outcome = graph::region_step(&plan, &store, r, progress).map_err(recon_error)?;
     let name = objects::name(job, &format!("region/{r}"));
-    ctx.block_on(objects::put(&ctx.res.objects, &name, &encode_region(&outcome)))?;
+    ctx.block_on(objects::put(
+        &ctx.res.objects,
+        &name,
+        &encode_region(&outcome),
+    ))?;
     let (done, total) = mark_done(ctx, job, r, true)?;
     if done < total {
-        return ctx.update_job(job, |v| set_stage(v, Stage::Polygonize, done as f64 / total as f64));
+        return ctx.update_job(job, |v| {
+            set_stage(v, Stage::Polygonize, done as f64 / total as f64)
+        });
     }
     ctx.update_job(job, |v| set_stage(v, Stage::Post, 0.0))?;
-    Ok(ctx.block_on(queue::publish(&ctx.res.js, &[Task { job, kind: TaskKind::Merge }]))?)
+    Ok(ctx.block_on(queue::publish(
+        &ctx.res.js,
+        &[Task {
+            job,
+            kind: TaskKind::Merge,
+        }],
+    ))?)
 }
 
 fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskError> {
@@ -444,19 +527,25 @@ fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskErr
     let (dag, _) = dag.ok_or_else(|| TaskError::Retry(format!("job {job}: no graph state")))?;
     let get = |key: String| {
         let name = objects::name(job, &key);
-        ctx.block_on(objects::get(&ctx.res.objects, &name)).map(|b| (b, name))
+        ctx.block_on(objects::get(&ctx.res.objects, &name))
+            .map(|b| (b, name))
     };
     let mut blocks = Vec::with_capacity(plan.blocks.len());
     for b in 0..plan.blocks.len() {
         let (bytes, name) = get(format!("block/{b}"))?;
-        blocks.push(BlockOutcome::decode(&bytes, &name).map_err(|e| TaskError::Retry(e.to_string()))?);
+        blocks.push(
+            BlockOutcome::decode(&bytes, &name).map_err(|e| TaskError::Retry(e.to_string()))?,
+        );
     }
     let mut regions = Vec::with_capacity(plan.grid.regions.len());
     for r in 0..plan.grid.regions.len() {
         let (bytes, name) = get(format!("region/{r}"))?;
         regions.push(decode_region(&bytes, &name).map_err(|e| TaskError::Retry(e.to_string()))?);
     }
-    let blocks_peak = blocks.iter().map(|b| b.report.peak_rss_mib).fold(0.0, f64::max);
+    let blocks_peak = blocks
+        .iter()
+        .map(|b| b.report.peak_rss_mib)
+        .fold(0.0, f64::max);
     let mut timings = Timings {
         clean: dag.prepare_s,
         polygonize: now_ms().saturating_sub(dag.regions_started_ms) as f64 / 1000.0,

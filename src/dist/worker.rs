@@ -6,11 +6,11 @@
 //! the job (NATS unreachable) is negatively acknowledged and runs again, until the last
 //! delivery, which fails the job.
 
+use super::DistError;
 use super::connect::{self, MAX_DELIVER, NatsConfig};
 use super::queue::{Task, TaskKind};
 use super::records::{self, JobRecord, job_key};
 use super::steps::{self, Ctx, TaskError, TaskProgress};
-use super::DistError;
 use async_nats::jetstream::{AckKind, Message};
 use futures_util::StreamExt;
 use std::sync::Arc;
@@ -110,10 +110,9 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
     };
     let secs = started.elapsed().as_secs_f64();
     let result = result.unwrap_or_else(|e| {
-        Err(TaskError::Job(crate::server::error::internal_body(&format!(
-            "task {label} of job {} panicked: {e}",
-            task.job
-        ))))
+        Err(TaskError::Job(crate::server::error::internal_body(
+            &format!("task {label} of job {} panicked: {e}", task.job),
+        )))
     });
     match result {
         Ok(ran) => {
@@ -133,7 +132,9 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
         }
         Err(TaskError::Retry(m)) => {
             tracing::warn!(job = %task.job, task = %label, error = %m, "task failed; it will run again");
-            let _ = msg.ack_with(AckKind::Nak(Some(Duration::from_secs(2)))).await;
+            let _ = msg
+                .ack_with(AckKind::Nak(Some(Duration::from_secs(2))))
+                .await;
         }
     }
 }

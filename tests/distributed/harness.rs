@@ -15,7 +15,11 @@ pub const ACK_WAIT_S: &str = "3";
 /// The `nats-server` binary, or `None` (with a message) when it is missing outside CI; under
 /// CI=true a missing server fails the test.
 pub fn nats_binary() -> Option<PathBuf> {
-    for p in ["/usr/sbin/nats-server", "/usr/bin/nats-server", "/usr/local/bin/nats-server"] {
+    for p in [
+        "/usr/sbin/nats-server",
+        "/usr/bin/nats-server",
+        "/usr/local/bin/nats-server",
+    ] {
         if Path::new(p).exists() {
             return Some(PathBuf::from(p));
         }
@@ -38,7 +42,10 @@ pub fn free_port() -> u16 {
 fn wait_port(port: u16, what: &str) {
     let t = Instant::now();
     while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(t.elapsed() < Duration::from_secs(30), "{what} did not start");
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "{what} did not start"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
 }
@@ -111,8 +118,15 @@ impl Nats {
         self.starts += 1;
         let log = self.dir.join(format!("nats-{}.log", self.starts));
         let mut cmd = Command::new(&self.bin);
-        cmd.args(["-js", "-a", "127.0.0.1", "-p", &self.port.to_string(), "-sd"])
-            .arg(&self.store);
+        cmd.args([
+            "-js",
+            "-a",
+            "127.0.0.1",
+            "-p",
+            &self.port.to_string(),
+            "-sd",
+        ])
+        .arg(&self.store);
         self.proc = Some(spawn(&mut cmd, log));
         wait_port(self.port, "nats-server");
     }
@@ -125,9 +139,15 @@ impl Nats {
 
 pub fn worker(nats: &Nats, dir: &Path, name: &str, concurrency: usize) -> Proc {
     let mut cmd = Command::new(BIN);
-    cmd.args(["worker", "--nats", &nats.url(), "--concurrency", &concurrency.to_string()])
-        .env("RBFSURF_NATS_ACK_WAIT_S", ACK_WAIT_S)
-        .env("RUST_LOG", "info");
+    cmd.args([
+        "worker",
+        "--nats",
+        &nats.url(),
+        "--concurrency",
+        &concurrency.to_string(),
+    ])
+    .env("RBFSURF_NATS_ACK_WAIT_S", ACK_WAIT_S)
+    .env("RUST_LOG", "info");
     spawn(&mut cmd, dir.join(format!("{name}.log")))
 }
 
@@ -136,10 +156,16 @@ pub fn serve(nats: &Nats, dir: &Path, name: &str) -> (Proc, String) {
     let port = free_port();
     let data = dir.join(format!("{name}-data"));
     let mut cmd = Command::new(BIN);
-    cmd.args(["serve", "--nats", &nats.url(), "--addr", &format!("127.0.0.1:{port}")])
-        .arg("--data-dir")
-        .arg(&data)
-        .env("RUST_LOG", "info");
+    cmd.args([
+        "serve",
+        "--nats",
+        &nats.url(),
+        "--addr",
+        &format!("127.0.0.1:{port}"),
+    ])
+    .arg("--data-dir")
+    .arg(&data)
+    .env("RUST_LOG", "info");
     let p = spawn(&mut cmd, dir.join(format!("{name}.log")));
     wait_port(port, "serve --nats");
     (p, format!("http://127.0.0.1:{port}"))
@@ -150,14 +176,21 @@ pub fn get(base: &str, path: &str) -> (u16, Vec<u8>) {
     let addr = base.trim_start_matches("http://");
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
     let mut raw = Vec::new();
     s.read_to_end(&mut raw).unwrap();
     let end = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
     let head = String::from_utf8_lossy(&raw[..end]).to_string();
     let status = head.split(' ').nth(1).unwrap().parse().unwrap();
     let mut body = raw[end + 4..].to_vec();
-    if head.to_ascii_lowercase().contains("transfer-encoding: chunked") {
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
         body = dechunk(&body);
     }
     (status, body)
@@ -232,7 +265,10 @@ pub fn report(path: &Path) -> serde_json::Value {
 pub fn wait_until(secs: u64, what: &str, mut cond: impl FnMut() -> bool) {
     let t = Instant::now();
     while !cond() {
-        assert!(t.elapsed() < Duration::from_secs(secs), "timed out waiting for {what}");
+        assert!(
+            t.elapsed() < Duration::from_secs(secs),
+            "timed out waiting for {what}"
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
 }
@@ -240,7 +276,10 @@ pub fn wait_until(secs: u64, what: &str, mut cond: impl FnMut() -> bool) {
 /// The ids of the jobs an API node lists.
 pub fn job_ids(base: &str) -> Vec<String> {
     let v = get_json(base, "/v1/reconstructions");
-    let list = v.as_array().cloned().or_else(|| v["jobs"].as_array().cloned());
+    let list = v
+        .as_array()
+        .cloned()
+        .or_else(|| v["jobs"].as_array().cloned());
     list.unwrap_or_default()
         .iter()
         .map(|j| j["id"].as_str().unwrap().to_string())

@@ -26,7 +26,16 @@ fn assert_same_mesh(a: &Path, b: &Path) {
 fn torus_and_local_run(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let cloud = dir.join("torus.ply");
     let local = dir.join("local.glb");
-    rbfsurf(&["generate", "torus", "--points", "30000", "--seed", "3", "-o", cloud.to_str().unwrap()]);
+    rbfsurf(&[
+        "generate",
+        "torus",
+        "--points",
+        "30000",
+        "--seed",
+        "3",
+        "-o",
+        cloud.to_str().unwrap(),
+    ]);
     rbfsurf(&[
         "reconstruct",
         cloud.to_str().unwrap(),
@@ -41,7 +50,10 @@ fn torus_and_local_run(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     ]);
     let rep = report(&dir.join("local.json"));
     let blocks = rep["blocks"].as_array().map_or(0, |b| b.len());
-    assert!(blocks >= 4, "the local run should go out of core in blocks: {blocks}");
+    assert!(
+        blocks >= 4,
+        "the local run should go out of core in blocks: {blocks}"
+    );
     (cloud, local)
 }
 
@@ -64,13 +76,22 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
 
     // Out of core: the task graph on two workers gives the local run's mesh.
     let (out, rep_path) = (dir.join("dist.glb"), dir.join("dist.json"));
-    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"]);
+    let job = submit(
+        &a,
+        &cloud,
+        &out,
+        &rep_path,
+        &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"],
+    );
     finish_submit(job);
     assert_same_mesh(&out, &local);
     let (rep, lrep) = (report(&rep_path), report(&dir.join("local.json")));
     assert_eq!(rep["mesh"], lrep["mesh"]);
     assert_eq!(rep["mesh"]["genus"], 1);
-    assert_eq!(rep["blocks"].as_array().unwrap().len(), lrep["blocks"].as_array().unwrap().len());
+    assert_eq!(
+        rep["blocks"].as_array().unwrap().len(),
+        lrep["blocks"].as_array().unwrap().len()
+    );
     let workers = workers_of(&rep);
     assert!(workers.len() >= 2, "blocks fitted by {workers:?}");
     for w in &workers {
@@ -81,9 +102,21 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
 
     // In memory: one whole-job task.
     let small = dir.join("sphere.ply");
-    rbfsurf(&["generate", "sphere", "--points", "3000", "-o", small.to_str().unwrap()]);
+    rbfsurf(&[
+        "generate",
+        "sphere",
+        "--points",
+        "3000",
+        "-o",
+        small.to_str().unwrap(),
+    ]);
     let small_local = dir.join("small-local.glb");
-    rbfsurf(&["reconstruct", small.to_str().unwrap(), "-o", small_local.to_str().unwrap()]);
+    rbfsurf(&[
+        "reconstruct",
+        small.to_str().unwrap(),
+        "-o",
+        small_local.to_str().unwrap(),
+    ]);
     let (small_out, small_rep) = (dir.join("small.glb"), dir.join("small.json"));
     finish_submit(submit(&a, &small, &small_out, &small_rep, &[]));
     assert_same_mesh(&small_out, &small_local);
@@ -94,7 +127,9 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
     assert_eq!(ids.len(), 2, "{ids:?}");
     api_a.kill();
     let (_api_b, b) = serve(&nats, dir, "api-b");
-    wait_until(30, "the new node to learn the jobs", || job_ids(&b).len() == 2);
+    wait_until(30, "the new node to learn the jobs", || {
+        job_ids(&b).len() == 2
+    });
     for id in &ids {
         wait_until(30, "the job to show as succeeded", || {
             get_json(&b, &format!("/v1/reconstructions/{id}"))["status"] == "succeeded"
@@ -111,7 +146,11 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
         .unwrap();
     let (status, glb) = get(&b, &format!("/v1/reconstructions/{dist_id}/mesh.glb"));
     assert_eq!(status, 200);
-    assert_eq!(glb, std::fs::read(&out).unwrap(), "the same GLB from the new node");
+    assert_eq!(
+        glb,
+        std::fs::read(&out).unwrap(),
+        "the same GLB from the new node"
+    );
 }
 
 /// Lines of a worker log that start or finish a task of `kind`.
@@ -132,7 +171,13 @@ fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
     let (_api, a) = serve(&nats, dir, "api");
     let (cloud, local) = torus_and_local_run(dir);
     let (out, rep_path) = (dir.join("dist.glb"), dir.join("dist.json"));
-    let job = submit(&a, &cloud, &out, &rep_path, &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"]);
+    let job = submit(
+        &a,
+        &cloud,
+        &out,
+        &rep_path,
+        &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"],
+    );
 
     // kill -9 the worker that took the start task (reading and preparing take seconds).
     let mut victim = None;
@@ -164,7 +209,9 @@ fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
     assert_same_mesh(&out, &local);
     let all = logs();
     assert!(
-        all.lines().any(|l| l.contains("task started") && l.contains("task=start") && l.contains("delivery=2")),
+        all.lines().any(|l| l.contains("task started")
+            && l.contains("task=start")
+            && l.contains("delivery=2")),
         "the killed worker's start task was delivered again:\n{all}"
     );
     let rep = report(&rep_path);

@@ -93,7 +93,12 @@ impl Plan {
             noise: self.noise,
             lambda: self.params.smoothing.lambda(),
             blocks: (self.blocks.iter())
-                .map(|b| ([b.core.min, b.core.max, b.outer.min, b.outer.max], b.members))
+                .map(|b| {
+                    (
+                        [b.core.min, b.core.max, b.outer.min, b.outer.max],
+                        b.members,
+                    )
+                })
                 .collect(),
             halo: self.halo,
             carrier,
@@ -122,7 +127,11 @@ impl Plan {
 
     /// Decodes [`Plan::encode`]; `params` are the job's parameters (the plan stores only the
     /// smoothing it resolved).
-    pub(crate) fn decode(bytes: &[u8], key: &str, params: &ReconParams) -> Result<Plan, StoreError> {
+    pub(crate) fn decode(
+        bytes: &[u8],
+        key: &str,
+        params: &ReconParams,
+    ) -> Result<Plan, StoreError> {
         if bytes.len() < 12 || &bytes[..4] != b"PLN1" {
             return Err(corrupt(key, "wrong tag"));
         }
@@ -263,7 +272,12 @@ impl BlockOutcome {
             profile_values: m.profile_values,
             dense_values: m.dense_values,
             factor_values: m.factor_values,
-            solvers: m.solver_used.names().iter().map(|s| s.to_string()).collect(),
+            solvers: m
+                .solver_used
+                .names()
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
             levels: (m.levels.iter())
                 .map(|l| LevelWire {
                     n: l.n,

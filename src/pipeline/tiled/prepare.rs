@@ -346,7 +346,8 @@ pub(crate) fn prepare(
     let halo = 3.0 * support.radius + 4.0 * grid.h;
     let blocks = partition(&cloud, &resolved, &support, block_points, halo, store)?;
     let sample = cloud.points.iter().step_by(step).copied().collect();
-    let sample_normals = (cloud.normals.as_ref()).map(|n| n.iter().step_by(step).copied().collect());
+    let sample_normals =
+        (cloud.normals.as_ref()).map(|n| n.iter().step_by(step).copied().collect());
     Ok(Plan {
         normalization,
         support,
