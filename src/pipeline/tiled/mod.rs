@@ -23,6 +23,7 @@
 //! consistent normals for the local carrier (no global reorientation); no vertex colours and no
 //! `--save-field`.
 
+#[cfg(feature = "nats")]
 pub(crate) mod codec;
 pub(crate) mod graph;
 mod merge;

@@ -78,6 +78,7 @@ pub(crate) struct Plan {
     pub sample: Vec<Point3>,
     /// Their normals (outwards, after any flip), when the input has normals: with the sample
     /// they rebuild the local carrier's far field wherever the plan is decoded.
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     pub sample_normals: Option<Vec<Point3>>,
     pub clean: CleanStats,
     pub normals_flipped: bool,

@@ -62,6 +62,7 @@ pub(crate) enum Store {
     Dir(tempfile::TempDir),
     /// Values elsewhere; `remove` keeps them (a redelivered task may read them again: the
     /// distributed executor deletes a job's values when the job ends).
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     Remote(Box<dyn RemoteStore>),
 }
 
