@@ -12,6 +12,8 @@
 pub mod clean;
 #[cfg(feature = "cli")]
 pub mod cli;
+#[cfg(feature = "nats")]
+pub mod dist;
 pub mod error;
 pub mod frep;
 pub mod geometry;

@@ -32,7 +32,7 @@ pub struct Report {
 }
 
 /// One block of a task-graph run (report `blocks[]`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct BlockReport {
     /// Block number (the order of the plan).
     pub id: usize,
@@ -203,7 +203,7 @@ pub struct ResidualReport {
 }
 
 /// Seconds per stage (`read` and `write` are filled by the caller that does the I/O).
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
 pub struct Timings {
     /// Reading the input file.
     pub read: f64,

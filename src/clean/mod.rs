@@ -29,7 +29,7 @@ impl Default for CleanParams {
 }
 
 /// What cleaning did (report `input` section).
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CleanStats {
     /// Points read.
     pub points: usize,

@@ -12,6 +12,8 @@ mod reconstruct;
 #[cfg(feature = "server")]
 mod serve;
 mod submit;
+#[cfg(feature = "nats")]
+mod worker;
 
 use clap::{Parser, Subcommand};
 
@@ -71,6 +73,9 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// Upload a point file to a running server, wait, download the mesh (non-zero exit on failure).
     Submit(submit::SubmitArgs),
+    /// Pull and run reconstruction tasks from NATS JetStream (the workers of `serve --nats`).
+    #[cfg(feature = "nats")]
+    Worker(worker::WorkerArgs),
     /// Print the OpenAPI document of the HTTP API.
     #[cfg(feature = "server")]
     Openapi(serve::OpenApiArgs),
@@ -113,6 +118,8 @@ where
         #[cfg(feature = "server")]
         Command::Serve(a) => serve::run(&a),
         Command::Submit(a) => submit::run(&a),
+        #[cfg(feature = "nats")]
+        Command::Worker(a) => worker::run(&a),
         #[cfg(feature = "server")]
         Command::Openapi(a) => serve::run_openapi(&a),
     };

@@ -53,6 +53,11 @@ pub struct ServeArgs {
     /// Allow cross-origin requests from this origin (repeatable; `*` = any) [default: none].
     #[arg(long = "cors-origin")]
     pub cors_origins: Vec<String>,
+    /// With --nats URL: a stateless API node over NATS JetStream (jobs run on `rbfsurf worker`
+    /// processes; the data directory only caches results).
+    #[cfg(feature = "nats")]
+    #[command(flatten)]
+    pub nats: super::worker::NatsArgs,
 }
 
 impl ServeArgs {
@@ -137,9 +142,8 @@ impl ServeArgs {
     }
 }
 
-/// Runs the server until Ctrl-C / SIGTERM.
-pub fn run(a: &ServeArgs) -> Result<()> {
-    let cfg = a.config()?;
+/// Logs to stderr (`RUST_LOG`, default `info`).
+pub(super) fn init_logging() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
@@ -147,12 +151,29 @@ pub fn run(a: &ServeArgs) -> Result<()> {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
+}
+
+/// Runs the server until Ctrl-C / SIGTERM.
+pub fn run(a: &ServeArgs) -> Result<()> {
+    let cfg = a.config()?;
+    #[cfg(feature = "nats")]
+    let nats = match &a.nats.nats {
+        Some(url) => Some(a.nats.config(url.clone())?),
+        None => None,
+    };
+    init_logging();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
     let addr = cfg.addr;
     let dir = cfg.data_dir.display().to_string();
+    #[cfg(feature = "nats")]
+    if let Some(nats) = nats {
+        return rt
+            .block_on(crate::dist::remote::serve_nats(cfg, nats))
+            .with_context(|| format!("serving on {addr} (jobs on NATS)"));
+    }
     rt.block_on(crate::server::serve(cfg))
         .with_context(|| format!("serving on {addr} with data directory {dir}"))
 }

@@ -31,7 +31,7 @@ pub const LAMBDA_PER_NOISE: f64 = 3.0;
 pub const MAX_LAMBDA: f64 = 2.0;
 
 /// The measured noise and the smoothing chosen from it.
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct NoiseEstimate {
     /// Median RMS residual of local quadric fits over 12 neighbours, normalised units.
     pub sigma: f64,

@@ -22,7 +22,7 @@ impl Default for Support {
 }
 
 /// The resolved radius and the neighbourhood statistics measured on a sample.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SupportEstimate {
     /// Support radius, normalised units.
     pub radius: f64,

@@ -29,14 +29,14 @@ pub use super::model::{InputInfo, JobStatus, JobView, unix_now};
 pub struct Job {
     /// Job id.
     pub id: Uuid,
-    tx: watch::Sender<JobView>,
+    pub(super) tx: watch::Sender<JobView>,
     cancel: AtomicBool,
     /// Unix-epoch milliseconds after which the running job is stopped (0 = none).
     deadline_ms: AtomicU64,
 }
 
 impl Job {
-    fn new(view: JobView) -> Arc<Job> {
+    pub(super) fn new(view: JobView) -> Arc<Job> {
         Arc::new(Job {
             id: view.id,
             tx: watch::Sender::new(view),
@@ -112,13 +112,15 @@ impl Progress for JobProgress<'_> {
 
 /// Owns every job, the queue and the worker threads.
 pub struct JobManager {
-    cfg: ServerConfig,
-    store: Store,
-    jobs: RwLock<HashMap<Uuid, Arc<Job>>>,
-    queue: Mutex<VecDeque<Arc<Job>>>,
-    wake: Condvar,
-    shutdown: AtomicBool,
-    workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
+    pub(super) cfg: ServerConfig,
+    pub(super) store: Store,
+    pub(super) jobs: RwLock<HashMap<Uuid, Arc<Job>>>,
+    /// Where jobs run when they do not run here (`serve --nats`); `None`: the embedded pool.
+    pub(super) backend: Option<Arc<dyn super::remote::JobBackend>>,
+    pub(super) queue: Mutex<VecDeque<Arc<Job>>>,
+    pub(super) wake: Condvar,
+    pub(super) shutdown: AtomicBool,
+    pub(super) workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
 }
 
 /// Why a submission was refused by the queue.
@@ -129,6 +131,8 @@ pub enum SubmitError {
     ShuttingDown,
     /// The job could not be stored.
     Storage(crate::io::IoError),
+    /// The job store (NATS) did not take the job.
+    Backend(String),
 }
 
 impl From<SubmitError> for ApiError {
@@ -147,6 +151,15 @@ impl From<SubmitError> for ApiError {
             )
             .retry_after(10),
             SubmitError::Storage(e) => ApiError::from(e),
+            SubmitError::Backend(detail) => {
+                tracing::error!(%detail, "the job store did not take the job");
+                ApiError::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "job_store_unavailable",
+                    "the job store is unavailable; retry after the Retry-After delay",
+                )
+                .retry_after(5)
+            }
         }
     }
 }
@@ -164,6 +177,7 @@ impl JobManager {
             wake: Condvar::new(),
             shutdown: AtomicBool::new(false),
             workers: Mutex::new(Vec::new()),
+            backend: None,
         });
         mgr.recover()?;
         let n = mgr.cfg.workers.max(1);
@@ -230,6 +244,9 @@ impl JobManager {
     ) -> Result<Arc<Job>, SubmitError> {
         if self.shutdown.load(Ordering::SeqCst) {
             return Err(SubmitError::ShuttingDown);
+        }
+        if let Some(b) = &self.backend {
+            return self.submit_remote(b.as_ref(), input, info, options);
         }
         let view = JobView {
             id: Uuid::new_v4(),
@@ -304,6 +321,10 @@ impl JobManager {
         if !accepted {
             return false;
         }
+        if let Some(b) = &self.backend {
+            b.cancel(job.id);
+            return true;
+        }
         let mut queue = lock(&self.queue);
         if let Some(pos) = queue.iter().position(|j| j.id == job.id) {
             queue.remove(pos);
@@ -315,6 +336,9 @@ impl JobManager {
 
     /// Deletes a finished job and its files.
     pub fn delete(&self, id: Uuid) -> std::io::Result<()> {
+        if let Some(b) = &self.backend {
+            b.delete(id)?;
+        }
         write(&self.jobs).remove(&id);
         self.store.remove(id)
     }
@@ -324,6 +348,10 @@ impl JobManager {
         let Some(age) = self.cfg.expire_after else {
             return 0;
         };
+        if self.backend.is_some() {
+            // Jobs in NATS live as long as the bucket keeps them (see docs/distributed.md).
+            return 0;
+        }
         let cutoff = unix_now().saturating_sub(age.as_secs());
         let old: Vec<Uuid> = read(&self.jobs)
             .values()
@@ -597,14 +625,14 @@ fn cancelled_error() -> ErrorBody {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-fn read<T>(m: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
+pub(super) fn read<T>(m: &RwLock<T>) -> std::sync::RwLockReadGuard<'_, T> {
     m.read().unwrap_or_else(|e| e.into_inner())
 }
 
-fn write<T>(m: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
+pub(super) fn write<T>(m: &RwLock<T>) -> std::sync::RwLockWriteGuard<'_, T> {
     m.write().unwrap_or_else(|e| e.into_inner())
 }

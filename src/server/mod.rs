@@ -13,6 +13,7 @@ pub mod feasibility;
 pub mod jobs;
 pub mod model;
 pub mod openapi;
+pub mod remote;
 pub mod routes;
 pub mod store;
 pub mod volume;
@@ -167,7 +168,8 @@ async fn expire_loop(jobs: Arc<JobManager>) {
     }
 }
 
-async fn shutdown_signal() {
+/// Resolves on Ctrl-C or SIGTERM.
+pub async fn shutdown_signal() {
     let ctrl_c = async {
         let _ = tokio::signal::ctrl_c().await;
     };

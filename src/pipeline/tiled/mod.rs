@@ -23,8 +23,11 @@
 //! consistent normals for the local carrier (no global reorientation); no vertex colours and no
 //! `--save-field`.
 
+#[cfg(feature = "nats")]
+pub(crate) mod codec;
+pub(crate) mod graph;
 mod merge;
-mod prepare;
+pub(crate) mod prepare;
 pub mod store;
 mod tasks;
 
@@ -40,11 +43,9 @@ use crate::report::{
 };
 use prepare::Plan;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use store::{PointSet, SplineData, Store};
-use tasks::{Quiet, block_key, piece_key, spline_key};
+use store::Store;
 
 /// Why the task graph refused or failed.
 #[derive(Debug, thiserror::Error)]
@@ -250,18 +251,92 @@ pub fn reconstruct_tiled(
     )?;
     progress.stage(Stage::Polygonize);
     let t = Instant::now();
-    let (mesh, mut poly, residual) = polygonize_all(&plan, &store, &pool, progress)?;
+    let (mesh, poly, residual) = polygonize_all(&plan, &store, &pool, progress)?;
     timings.polygonize = t.elapsed().as_secs_f64();
     drop(store);
     progress.stage(Stage::Post);
+    finish(
+        &plan,
+        mesh,
+        poly,
+        residual,
+        block_reports,
+        matrix,
+        timings,
+        start,
+    )
+}
+
+/// Run `task` for `0..n` on `pool`, results in order; the first error wins.
+fn run_tasks<T: Send>(
+    pool: &rayon::ThreadPool,
+    n: usize,
+    task: impl Fn(usize) -> Result<T, ReconError> + Sync + Send,
+) -> Result<Vec<T>, ReconError> {
+    pool.install(|| (0..n).into_par_iter().map(task).collect())
+}
+
+/// Fit every block (stage `blocks`) with [`graph::fit_step`].
+fn fit_all(
+    plan: &Plan,
+    store: &Store,
+    pool: &rayon::ThreadPool,
+    worker: &str,
+    progress: &dyn Progress,
+    timings: &mut Timings,
+) -> Result<(Vec<BlockReport>, MatrixReport), ReconError> {
+    progress.stage(Stage::Blocks);
+    let done = AtomicUsize::new(0);
+    let nb = plan.blocks.len();
+    let results = run_tasks(pool, nb, |b| {
+        super::check_cancel(progress)?;
+        let outcome = graph::fit_step(plan, store, b, worker, progress)?;
+        progress.fraction((done.fetch_add(1, Ordering::Relaxed) + 1) as f64 / nb as f64);
+        Ok(outcome)
+    })?;
+    Ok(graph::merge_blocks(results, timings))
+}
+
+/// Polygonize every region with points near it (stage `polygonize`, [`graph::region_step`]),
+/// then weld the pieces in region order. Returns the mesh, the statistics and the residual.
+fn polygonize_all(
+    plan: &Plan,
+    store: &Store,
+    pool: &rayon::ThreadPool,
+    progress: &dyn Progress,
+) -> Result<(TriMesh, PolygonizeReport, ResidualReport), ReconError> {
+    let nr = plan.grid.regions.len();
+    let done = AtomicUsize::new(0);
+    let results = run_tasks(pool, nr, |r| {
+        super::check_cancel(progress)?;
+        let out = graph::region_step(plan, store, r, progress)?;
+        progress.fraction((done.fetch_add(1, Ordering::Relaxed) + 1) as f64 / nr as f64);
+        Ok(out)
+    })?;
+    graph::weld_step(plan, store, &results)
+}
+
+/// The last step of either executor: post-process the welded mesh and write the report.
+/// `timings` has the phases so far; `start` is when the run began.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn finish(
+    plan: &Plan,
+    mesh: TriMesh,
+    mut poly: PolygonizeReport,
+    residual: ResidualReport,
+    blocks: Vec<BlockReport>,
+    matrix: MatrixReport,
+    mut timings: Timings,
+    start: Instant,
+) -> Result<super::Reconstruction, ReconError> {
     let t = Instant::now();
-    let mesh = post(&plan, mesh, &mut poly)?;
+    let mesh = post(plan, mesh, &mut poly)?;
     let topology = crate::mesh::topology::analyze(&mesh);
     timings.post = t.elapsed().as_secs_f64();
     timings.total = start.elapsed().as_secs_f64();
     let report = Report {
         input: plan.clean,
-        params: params_report(&plan),
+        params: params_report(plan),
         matrix,
         residual,
         mesh: topology,
@@ -275,179 +350,9 @@ pub fn reconstruct_tiled(
             color: "none",
             ..Default::default()
         },
-        blocks: block_reports,
+        blocks,
     };
     Ok(super::Reconstruction { mesh, report })
-}
-
-/// Run `task` for `0..n` on `pool`, results in order; the first error wins.
-fn run_tasks<T: Send>(
-    pool: &rayon::ThreadPool,
-    n: usize,
-    task: impl Fn(usize) -> Result<T, ReconError> + Sync + Send,
-) -> Result<Vec<T>, ReconError> {
-    pool.install(|| (0..n).into_par_iter().map(task).collect())
-}
-
-/// Fit every block (stage `blocks`): read its points, fit, write its spline, free its points.
-fn fit_all(
-    plan: &Plan,
-    store: &Store,
-    pool: &rayon::ThreadPool,
-    worker: &str,
-    progress: &dyn Progress,
-    timings: &mut Timings,
-) -> Result<(Vec<BlockReport>, MatrixReport), ReconError> {
-    progress.stage(Stage::Blocks);
-    let done = AtomicUsize::new(0);
-    let quiet = Quiet(progress);
-    let nb = plan.blocks.len();
-    let results = run_tasks(pool, nb, |b| {
-        super::check_cancel(progress)?;
-        let t = Instant::now();
-        let key = block_key(b);
-        let set = PointSet::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
-        let fitted = tasks::fit_block(plan, b, &set, &quiet)?;
-        drop(set);
-        store
-            .put(&spline_key(b), fitted.spline.encode())
-            .map_err(TiledError::from)?;
-        let report = BlockReport {
-            id: b,
-            worker: worker.to_string(),
-            points: fitted.points,
-            seconds: t.elapsed().as_secs_f64(),
-            peak_rss_mib: peak_rss_mib(),
-        };
-        progress.fraction((done.fetch_add(1, Ordering::Relaxed) + 1) as f64 / nb as f64);
-        Ok((report, fitted.matrix, fitted.timings))
-    })?;
-    let mut matrix = MatrixReport::default();
-    let mut reports = Vec::with_capacity(nb);
-    for (report, m, t) in results {
-        super::blocks::merge_report(&mut matrix, m);
-        timings.assemble += t.assemble;
-        timings.order += t.order;
-        timings.factor += t.factor;
-        timings.solve += t.solve;
-        reports.push(report);
-    }
-    matrix.blocks = nb;
-    Ok((reports, matrix))
-}
-
-/// Every point within the halo of region `r`'s box, in global order, from the point sets of the
-/// blocks whose core meets that reach (every point lies in some block's core).
-fn region_points(plan: &Plan, store: &Store, r: usize) -> Result<PointSet, ReconError> {
-    let reach = plan.grid.region_box(r).inflated(plan.halo);
-    let mut rows: Vec<(
-        u32,
-        crate::geometry::Point3,
-        Option<crate::geometry::Point3>,
-    )> = Vec::new();
-    for (b, block) in plan.blocks.iter().enumerate() {
-        if !block.core.intersects(&reach) {
-            continue;
-        }
-        let key = block_key(b);
-        let set = PointSet::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
-        for (k, p) in set.points.iter().enumerate() {
-            if reach.contains(p) {
-                rows.push((set.ids[k], *p, set.normals.as_ref().map(|n| n[k])));
-            }
-        }
-    }
-    rows.sort_unstable_by_key(|r| r.0);
-    rows.dedup_by_key(|r| r.0);
-    let has_normals = rows.first().is_some_and(|r| r.2.is_some());
-    Ok(PointSet {
-        ids: rows.iter().map(|r| r.0).collect(),
-        points: rows.iter().map(|r| r.1).collect(),
-        normals: has_normals.then(|| rows.iter().map(|r| r.2.unwrap_or([0.0; 3])).collect()),
-    })
-}
-
-/// The splines of the blocks whose outer box meets region `r`'s box, ascending block id.
-fn region_splines(
-    plan: &Plan,
-    store: &Store,
-    r: usize,
-) -> Result<Vec<(usize, crate::rbf::Spline)>, ReconError> {
-    let bx = plan.grid.region_box(r);
-    let mut out = Vec::new();
-    for (b, block) in plan.blocks.iter().enumerate() {
-        if !block.outer.intersects(&bx) {
-            continue;
-        }
-        let key = spline_key(b);
-        let data = SplineData::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
-        if !data.levels.is_empty() {
-            out.push((b, tasks::spline_from_data(data, &plan.params)?));
-        }
-    }
-    Ok(out)
-}
-
-/// Polygonize every region with points near it (stage `polygonize`), write its piece, then weld
-/// the pieces in region order. Returns the mesh, the statistics and the residual at the data.
-fn polygonize_all(
-    plan: &Plan,
-    store: &Store,
-    pool: &rayon::ThreadPool,
-    progress: &dyn Progress,
-) -> Result<(TriMesh, PolygonizeReport, ResidualReport), ReconError> {
-    let nr = plan.grid.regions.len();
-    let done = AtomicUsize::new(0);
-    let quiet = Quiet(progress);
-    let results = run_tasks(pool, nr, |r| {
-        super::check_cancel(progress)?;
-        let set = region_points(plan, store, r)?;
-        let out = if set.points.is_empty() {
-            None
-        } else {
-            let splines = region_splines(plan, store, r)?;
-            let piece = tasks::polygonize_region(plan, r, &set, splines, &quiet)?;
-            store
-                .put(&piece_key(r), store::encode_piece(&piece.mesh))
-                .map_err(TiledError::from)?;
-            Some((piece.stats, piece.residual))
-        };
-        progress.fraction((done.fetch_add(1, Ordering::Relaxed) + 1) as f64 / nr as f64);
-        Ok(out)
-    })?;
-    let mut poly = PolygonizeReport {
-        cell_size: plan.grid.h,
-        ..Default::default()
-    };
-    let (mut sum2, mut max, mut count) = (0.0, 0.0f64, 0usize);
-    let mut mesh = TriMesh::default();
-    let mut seen = HashMap::new();
-    for (r, res) in results.into_iter().enumerate() {
-        let Some((stats, (s2, m, c))) = res else {
-            continue;
-        };
-        poly.cells_total = stats.cells_total;
-        poly.blocks_total = stats.blocks_total;
-        poly.blocks_active += stats.blocks_active;
-        poly.field_evaluations += stats.field_evaluations;
-        sum2 += s2;
-        max = max.max(m);
-        count += c;
-        let key = piece_key(r);
-        let piece = store::decode_piece(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
-        store.remove(&key);
-        merge::append_piece(&mut mesh, &mut seen, piece, r, &plan.grid.region_box(r));
-    }
-    poly.triangles_polygonized = mesh.triangles.len();
-    let residual = ResidualReport {
-        rms: (sum2 / count.max(1) as f64).sqrt(),
-        max,
-    };
-    Ok((mesh, poly, residual))
 }
 
 /// Floaters (support counted on the subsample), small pieces, back to input units, GPU order.

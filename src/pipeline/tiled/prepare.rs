@@ -76,6 +76,10 @@ pub(crate) struct Plan {
     pub grid: GridPlan,
     /// Every `step`-th cleaned point (normalised units), at most [`SAMPLE_POINTS`].
     pub sample: Vec<Point3>,
+    /// Their normals (outwards, after any flip), when the input has normals: with the sample
+    /// they rebuild the local carrier's far field wherever the plan is decoded.
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
+    pub sample_normals: Option<Vec<Point3>>,
     pub clean: CleanStats,
     pub normals_flipped: bool,
     pub carrier_kind: CarrierKind,
@@ -343,6 +347,8 @@ pub(crate) fn prepare(
     let halo = 3.0 * support.radius + 4.0 * grid.h;
     let blocks = partition(&cloud, &resolved, &support, block_points, halo, store)?;
     let sample = cloud.points.iter().step_by(step).copied().collect();
+    let sample_normals =
+        (cloud.normals.as_ref()).map(|n| n.iter().step_by(step).copied().collect());
     Ok(Plan {
         normalization,
         support,
@@ -353,6 +359,7 @@ pub(crate) fn prepare(
         carrier,
         grid,
         sample,
+        sample_normals,
         clean,
         normals_flipped,
         carrier_kind,

@@ -47,10 +47,23 @@ pub enum StoreError {
     },
 }
 
+/// A store kept outside this process (the distributed executor's object store), reached
+/// synchronously from the task threads.
+pub(crate) trait RemoteStore: Send + Sync {
+    /// Stores `bytes` under `key` (replacing any earlier value).
+    fn put(&self, key: &str, bytes: Vec<u8>) -> Result<(), StoreError>;
+    /// The bytes stored under `key`.
+    fn get(&self, key: &str) -> Result<Vec<u8>, StoreError>;
+}
+
 /// A key–value store of encoded task results.
 pub(crate) enum Store {
     Memory(Mutex<HashMap<String, Vec<u8>>>),
     Dir(tempfile::TempDir),
+    /// Values elsewhere; `remove` keeps them (a redelivered task may read them again: the
+    /// distributed executor deletes a job's values when the job ends).
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
+    Remote(Box<dyn RemoteStore>),
 }
 
 impl Store {
@@ -92,6 +105,7 @@ impl Store {
                 let mut f = std::fs::File::create(&path).map_err(io)?;
                 f.write_all(&bytes).map_err(io)
             }
+            Store::Remote(r) => r.put(key, bytes),
         }
     }
 
@@ -111,6 +125,7 @@ impl Store {
                 let path = Self::path(d, key);
                 std::fs::read(&path).map_err(|source| StoreError::Io { path, source })
             }
+            Store::Remote(r) => r.get(key),
         }
     }
 
@@ -123,6 +138,7 @@ impl Store {
             Store::Dir(d) => {
                 let _ = std::fs::remove_file(Self::path(d, key));
             }
+            Store::Remote(_) => {}
         }
     }
 }

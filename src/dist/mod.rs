@@ -1,0 +1,83 @@
+//! The distributed executor on NATS JetStream: `rbfsurf worker` processes run the task graph's
+//! steps ([`crate::pipeline::tiled`]) and whole in-memory jobs; `rbfsurf serve --nats` nodes are
+//! stateless API nodes over the same job records.
+//!
+//! ```text
+//!  API node ── input ─► object store "rbfsurf-objects": <job>/input.<ext>, plan, points/<b>, spline/<b>,
+//!     │                                     block/<b>, piece/<r>, region/<r>, result/<file>
+//!     ├── record ─► key-value "rbfsurf-jobs": job.<id> (the job view + options), dag.<id> (done bits)
+//!     └── task  ─► work-queue stream "RBFSURF_TASKS", subjects rbfsurf.tasks.{start,block,region,merge}
+//!                    └─► durable pull consumer "rbfsurf-workers" (explicit ack, ack wait ≤ 30 s,
+//!                        progress heartbeats while a task runs, at most 5 deliveries)
+//! ```
+//!
+//! A job starts as one `start` task. Its worker reads the input; when the in-memory estimate
+//! fits the job's memory budget it reconstructs the whole job there (the normal run stage, every
+//! feature); otherwise it runs the graph's prepare step, stores the plan and the blocks' point
+//! sets, and publishes one `block` task per block. The worker whose block completes the set
+//! (recorded with compare-and-set on `dag.<id>`) publishes the `region` tasks, and the one that
+//! completes the regions the `merge` task, which welds, post-processes and stores the results.
+//! Every task writes only keys named by its job and block or region, and every publish carries
+//! a message id (JetStream drops duplicates), so a redelivered task repeats the same writes.
+
+pub mod connect;
+mod objects;
+mod queue;
+mod records;
+pub mod remote;
+mod steps;
+pub mod worker;
+
+pub use connect::NatsConfig;
+
+/// What went wrong talking to NATS or running a task.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DistError {
+    /// No connection to the server.
+    #[error("cannot connect to NATS at {url}: {message}")]
+    Connect {
+        /// The URL without credentials.
+        url: String,
+        /// The client's message.
+        message: String,
+    },
+    /// A JetStream request failed (the server may be restarting: callers retry).
+    #[error("NATS {what}: {message}")]
+    Nats {
+        /// What was asked.
+        what: String,
+        /// The client's message.
+        message: String,
+    },
+    /// A stored value is missing or does not decode.
+    #[error("{what} of job {job} is missing or damaged: {message}")]
+    Corrupt {
+        /// The job.
+        job: uuid::Uuid,
+        /// Which value.
+        what: String,
+        /// Details.
+        message: String,
+    },
+}
+
+impl DistError {
+    /// Maps a client error to [`DistError::Nats`] naming `what`.
+    pub(crate) fn nats<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> DistError + '_ {
+        move |e| DistError::Nats {
+            what: what.to_string(),
+            message: e.to_string(),
+        }
+    }
+}
+
+/// This process's worker id: host name and process id (unique per process on a host).
+pub fn worker_id() -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "host".to_string());
+    format!("{host}-{}", std::process::id())
+}

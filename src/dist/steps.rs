@@ -1,0 +1,574 @@
+//! The bodies of the tasks, run on blocking threads: start (whole job, or prepare and publish
+//! the blocks), block, region, merge. Each calls the task graph's own step functions
+//! ([`crate::pipeline::tiled`]) over the object store, records what it did with compare-and-set,
+//! and publishes the next phase when its update completed the current one.
+
+use super::objects::{self, JobObjects};
+use super::queue::{self, Task, TaskKind};
+use super::records::{self, DagState, JobRecord, dag_key, job_key};
+use super::{DistError, connect::Resources};
+use crate::error::{ErrorKind, ReconError};
+use crate::io::{MeshFormat, PointFormat, ReadLimits};
+use crate::params::ReconParams;
+use crate::pipeline::tiled::codec::{decode_region, encode_region};
+use crate::pipeline::tiled::graph::{self, BlockOutcome};
+use crate::pipeline::tiled::prepare::{self, Plan};
+use crate::pipeline::tiled::store::Store;
+use crate::pipeline::tiled::{self, TiledError, TiledOptions};
+use crate::pipeline::{Execution, PointSource, RunError, RunOutput, plan_execution, run};
+use crate::progress::{Progress, Stage};
+use crate::report::Timings;
+use crate::server::error::ErrorBody;
+use crate::server::model::{JobStatus, unix_now};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use uuid::Uuid;
+
+/// Why a task did not complete.
+#[derive(Debug)]
+pub enum TaskError {
+    /// The job cannot succeed (bad input, over a limit, a bug): it fails with this error.
+    Job(ErrorBody),
+    /// Something outside the job failed (NATS unreachable): run the task again.
+    Retry(String),
+}
+
+impl From<DistError> for TaskError {
+    fn from(e: DistError) -> Self {
+        TaskError::Retry(e.to_string())
+    }
+}
+
+/// A reconstruction error as the job's error (a stop requested by a DELETE included).
+fn recon_error(e: ReconError) -> TaskError {
+    match e {
+        ReconError::Tiled(TiledError::Store(s)) => TaskError::Retry(s.to_string()),
+        e => TaskError::Job(ErrorBody {
+            code: e.kind().code().into(),
+            message: e.to_string(),
+        }),
+    }
+}
+
+/// What every task of this process shares.
+pub struct Ctx {
+    /// NATS resources.
+    pub res: Resources,
+    /// The runtime blocking threads call into.
+    pub rt: tokio::runtime::Handle,
+    /// This worker's id (`blocks[].worker`).
+    pub worker: String,
+    /// Tasks run at once (also the concurrency the block size is planned for).
+    pub concurrency: usize,
+    /// The last plans decoded, by job (a plan rebuilds the far field: worth keeping).
+    plans: Mutex<VecDeque<(Uuid, Arc<Plan>)>>,
+}
+
+impl Ctx {
+    /// A context over `res`.
+    pub fn new(
+        res: Resources,
+        rt: tokio::runtime::Handle,
+        worker: String,
+        concurrency: usize,
+    ) -> Ctx {
+        Ctx {
+            res,
+            rt,
+            worker,
+            concurrency,
+            plans: Mutex::new(VecDeque::new()),
+        }
+    }
+
+    fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
+        self.rt.block_on(f)
+    }
+
+    fn store(&self, job: Uuid) -> Store {
+        Store::Remote(Box::new(JobObjects {
+            os: self.res.objects.clone(),
+            job,
+            rt: self.rt.clone(),
+        }))
+    }
+
+    fn record(&self, job: Uuid) -> Result<Option<JobRecord>, TaskError> {
+        let r = self.block_on(records::load::<JobRecord>(&self.res.jobs, &job_key(job)))?;
+        Ok(r.map(|(v, _)| v))
+    }
+
+    /// Changes job `job`'s record (compare-and-set) unless it is terminal.
+    pub fn update_job(
+        &self,
+        job: Uuid,
+        mut f: impl FnMut(&mut JobRecord),
+    ) -> Result<(), TaskError> {
+        self.block_on(records::update::<JobRecord, _>(
+            &self.res.jobs,
+            &job_key(job),
+            |r| {
+                if r.view.status.is_terminal() {
+                    return false;
+                }
+                let before = serde_json::to_vec(&r.view).unwrap_or_default();
+                f(r);
+                serde_json::to_vec(&r.view).unwrap_or_default() != before
+            },
+        ))?;
+        Ok(())
+    }
+
+    fn plan(&self, job: Uuid, params: &ReconParams) -> Result<Arc<Plan>, TaskError> {
+        let mut plans = self.plans.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, p)) = plans.iter().find(|(j, _)| *j == job) {
+            return Ok(Arc::clone(p));
+        }
+        drop(plans);
+        let name = objects::name(job, "plan");
+        let bytes = self.block_on(objects::get(&self.res.objects, &name))?;
+        let plan =
+            Plan::decode(&bytes, &name, params).map_err(|e| TaskError::Retry(e.to_string()))?;
+        let plan = Arc::new(plan);
+        plans = self.plans.lock().unwrap_or_else(|e| e.into_inner());
+        plans.push_front((job, Arc::clone(&plan)));
+        plans.truncate(2);
+        Ok(plan)
+    }
+}
+
+/// Progress of the running task: the stage and fraction (published by the worker loop) and the
+/// cancel flag (set by the worker loop from the job record).
+#[derive(Default)]
+pub struct TaskProgress {
+    /// Set when the job was cancelled.
+    pub cancel: AtomicBool,
+    stage: Mutex<Option<Stage>>,
+    fraction: AtomicU64,
+}
+
+impl TaskProgress {
+    /// The job's overall progress so far, with its stage (whole-job tasks only).
+    pub fn snapshot(&self) -> Option<(Stage, f64)> {
+        let stage = (*self.stage.lock().unwrap_or_else(|e| e.into_inner()))?;
+        Some((stage, f64::from_bits(self.fraction.load(Ordering::Relaxed))))
+    }
+}
+
+impl Progress for TaskProgress {
+    fn stage(&self, stage: Stage) {
+        *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = Some(stage);
+        self.fraction.store(0f64.to_bits(), Ordering::Relaxed);
+    }
+    fn fraction(&self, done: f64) {
+        self.fraction
+            .store(done.clamp(0.0, 1.0).to_bits(), Ordering::Relaxed);
+    }
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// Runs `task`. `Ok(false)`: skipped (the job is finished, cancelled or gone).
+pub fn run_task(ctx: &Ctx, task: Task, progress: &TaskProgress) -> Result<bool, TaskError> {
+    let Some(rec) = ctx.record(task.job)? else {
+        return Ok(false);
+    };
+    if rec.view.status.is_terminal() || rec.cancel {
+        return Ok(false);
+    }
+    let params = ReconParams::try_from(&rec.options).map_err(|e| {
+        TaskError::Job(ErrorBody {
+            code: ErrorKind::BadParameter.code().into(),
+            message: e.to_string(),
+        })
+    })?;
+    match task.kind {
+        TaskKind::Start => start(ctx, &rec, &params, progress),
+        TaskKind::Block(b) => block(ctx, task.job, &params, b, progress),
+        TaskKind::Region(r) => region(ctx, task.job, &params, r, progress),
+        TaskKind::Merge => merge(ctx, &rec, &params),
+    }
+    .map(|()| true)
+}
+
+fn start(
+    ctx: &Ctx,
+    rec: &JobRecord,
+    params: &ReconParams,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let job = rec.view.id;
+    ctx.update_job(job, |r| {
+        if r.view.status == JobStatus::Queued {
+            r.view.status = JobStatus::Running;
+            r.view.started_at = Some(unix_now());
+            r.view.stage = Some(Stage::Read.name().into());
+        }
+    })?;
+    if [
+        crate::server::volume::COMPOSITION,
+        crate::server::volume::MORPH,
+    ]
+    .contains(&rec.view.input.format.as_str())
+    {
+        return Err(TaskError::Job(ErrorBody {
+            code: ErrorKind::BadParameter.code().into(),
+            message:
+                "composition and morph jobs run on the embedded service (serve without --nats)"
+                    .into(),
+        }));
+    }
+    let data = ctx.block_on(objects::get(
+        &ctx.res.objects,
+        &objects::name(job, &rec.view.input.file),
+    ))?;
+    let format =
+        PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
+            TaskError::Job(crate::server::error::internal_body(
+                "stored input has an unknown extension",
+            ))
+        })?;
+    let limits = ReadLimits {
+        max_points: rec.max_points,
+        max_bytes: rec.max_bytes,
+        max_memory_mib: params.max_memory_mib,
+    };
+    let cloud = crate::io::parse_point_cloud(&data, format, &limits)
+        .map_err(|e| run_error(RunError::Read(e)))?;
+    match plan_execution(cloud.points.len() as u64, params).map_err(recon_error)? {
+        Execution::InMemory => {
+            drop(cloud);
+            whole(
+                ctx,
+                rec,
+                params,
+                PointSource::Bytes {
+                    data: &data,
+                    format,
+                },
+                &limits,
+                progress,
+            )
+        }
+        Execution::OutOfCore(_) => {
+            drop(data);
+            prepare_graph(ctx, job, params, cloud, progress)
+        }
+    }
+}
+
+/// The error of a failed run as the job's error (as the embedded service words it).
+fn run_error(e: RunError) -> TaskError {
+    match e {
+        RunError::Reconstruct {
+            source: ReconError::Tiled(TiledError::Store(s)),
+            ..
+        } => TaskError::Retry(s.to_string()),
+        e @ (RunError::Read(_) | RunError::Write(_)) if e.kind() == ErrorKind::Internal => {
+            TaskError::Job(crate::server::error::internal_body(&e.to_string()))
+        }
+        e => TaskError::Job(ErrorBody {
+            code: e.kind().code().into(),
+            message: e.to_string(),
+        }),
+    }
+}
+
+/// The whole job on this worker: the run stage into a temporary directory, then the results.
+fn whole(
+    ctx: &Ctx,
+    rec: &JobRecord,
+    params: &ReconParams,
+    source: PointSource<'_>,
+    limits: &ReadLimits,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let dir = tempfile::tempdir().map_err(|e| TaskError::Retry(e.to_string()))?;
+    let mesh = dir.path().join("mesh.glb");
+    let report = dir.path().join("report.json");
+    let field = dir.path().join("fitted.field");
+    let output = RunOutput {
+        mesh: &mesh,
+        format: MeshFormat::Glb(rec.options.glb()),
+        report: Some(&report),
+        field: (params.method == crate::params::Method::Csrbf).then_some(field.as_path()),
+        job_memory_mib: None,
+    };
+    let summary = run(source, params, limits, &output, progress).map_err(run_error)?;
+    let results = upload_results(ctx, rec.view.id, dir.path())?;
+    let done = Outcome::Succeeded {
+        triangles: summary.triangles,
+        results,
+    };
+    finish_job(ctx, rec.view.id, done)
+}
+
+/// Uploads every file of `dir` as `result/<file>`; returns the file names.
+fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<Vec<String>, TaskError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| TaskError::Retry(e.to_string()))?;
+    let mut files = Vec::new();
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().to_string();
+        let bytes = std::fs::read(entry.path()).map_err(|e| TaskError::Retry(e.to_string()))?;
+        let name = objects::name(job, &format!("result/{file}"));
+        ctx.block_on(objects::put(&ctx.res.objects, &name, &bytes))?;
+        files.push(file);
+    }
+    Ok(files)
+}
+
+/// How a job ends.
+pub enum Outcome {
+    /// With a mesh of this many triangles and these result files.
+    Succeeded {
+        /// Triangles of the mesh.
+        triangles: usize,
+        /// Files under `result/`.
+        results: Vec<String>,
+    },
+    /// With this error.
+    Failed(ErrorBody),
+}
+
+/// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`) and
+/// drops its intermediate values.
+pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskError> {
+    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
+    if let Some((d, _)) = dag {
+        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
+        ctx.block_on(objects::delete(&ctx.res.objects, job, &keys));
+    }
+    let (status, error, triangles, results) = match outcome {
+        Outcome::Succeeded { triangles, results } => {
+            (JobStatus::Succeeded, None, Some(triangles), results)
+        }
+        Outcome::Failed(e) => (JobStatus::Failed, Some(e), None, Vec::new()),
+    };
+    ctx.update_job(job, |r| {
+        r.results = results.clone();
+        let (status, error, triangles) = if r.cancel {
+            let e = ErrorBody {
+                code: "cancelled".into(),
+                message: "cancelled by a DELETE request".into(),
+            };
+            (JobStatus::Cancelled, Some(e), None)
+        } else {
+            (status, error.clone(), triangles)
+        };
+        r.view.status = status;
+        r.view.error = error;
+        r.view.triangles = triangles;
+        r.view.finished_at = Some(unix_now());
+        if status == JobStatus::Succeeded {
+            r.view.progress = 1.0;
+            r.view.stage_progress = 1.0;
+        }
+    })
+}
+
+fn prepare_graph(
+    ctx: &Ctx,
+    job: Uuid,
+    params: &ReconParams,
+    cloud: crate::geometry::PointCloud,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let t = Instant::now();
+    let n = cloud.points.len() as u64;
+    let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
+    if est.prepare_mib > params.max_memory_mib as f64 {
+        let e = TiledError::OverBudget {
+            points: n,
+            mib: est.peak_mib,
+            budget_mib: params.max_memory_mib,
+        };
+        return Err(recon_error(e.into()));
+    }
+    params.validate().map_err(|e| recon_error(e.into()))?;
+    let options = TiledOptions {
+        worker: ctx.worker.clone(),
+        ..Default::default()
+    };
+    let store = ctx.store(job);
+    let plan = prepare::prepare(cloud, params, &options, est.block_points, &store, progress)
+        .map_err(recon_error)?;
+    let blob = plan.encode();
+    ctx.block_on(objects::put(
+        &ctx.res.objects,
+        &objects::name(job, "plan"),
+        &blob,
+    ))?;
+    let dag = DagState {
+        blocks: vec![false; plan.blocks.len()],
+        regions: vec![false; plan.grid.regions.len()],
+        prepare_s: t.elapsed().as_secs_f64(),
+        regions_started_ms: 0,
+    };
+    ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
+    ctx.update_job(job, |r| set_stage(r, Stage::Blocks, 0.0))?;
+    let tasks: Vec<Task> = (0..plan.blocks.len())
+        .map(|b| Task {
+            job,
+            kind: TaskKind::Block(b),
+        })
+        .collect();
+    ctx.block_on(queue::publish(&ctx.res.js, &tasks))?;
+    Ok(())
+}
+
+fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {
+    r.view.stage = Some(stage.name().into());
+    r.view.stage_progress = fraction;
+    if let Some(p) = stage.overall(fraction) {
+        r.view.progress = r.view.progress.max(p);
+    }
+}
+
+fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// Marks item `k` of the phase done; returns (done, total) after the update.
+fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, usize), TaskError> {
+    let dag = ctx.block_on(records::update::<DagState, _>(
+        &ctx.res.jobs,
+        &dag_key(job),
+        |d| {
+            let flags = if regions {
+                &mut d.regions
+            } else {
+                &mut d.blocks
+            };
+            if k >= flags.len() || flags[k] {
+                return false;
+            }
+            flags[k] = true;
+            if !regions && d.blocks.iter().all(|&x| x) {
+                d.regions_started_ms = now_ms();
+            }
+            true
+        },
+    ))?;
+    let dag = dag.ok_or_else(|| TaskError::Retry(format!("job {job}: no graph state")))?;
+    let flags = if regions { &dag.regions } else { &dag.blocks };
+    Ok((flags.iter().filter(|&&x| x).count(), flags.len()))
+}
+
+fn block(
+    ctx: &Ctx,
+    job: Uuid,
+    params: &ReconParams,
+    b: usize,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let plan = ctx.plan(job, params)?;
+    let store = ctx.store(job);
+    let outcome = graph::fit_step(&plan, &store, b, &ctx.worker, progress).map_err(recon_error)?;
+    let name = objects::name(job, &format!("block/{b}"));
+    ctx.block_on(objects::put(&ctx.res.objects, &name, &outcome.encode()))?;
+    let (done, total) = mark_done(ctx, job, b, false)?;
+    if done < total {
+        return ctx.update_job(job, |r| {
+            set_stage(r, Stage::Blocks, done as f64 / total as f64)
+        });
+    }
+    ctx.update_job(job, |r| set_stage(r, Stage::Polygonize, 0.0))?;
+    let tasks: Vec<Task> = (0..plan.grid.regions.len())
+        .map(|r| Task {
+            job,
+            kind: TaskKind::Region(r),
+        })
+        .collect();
+    Ok(ctx.block_on(queue::publish(&ctx.res.js, &tasks))?)
+}
+
+fn region(
+    ctx: &Ctx,
+    job: Uuid,
+    params: &ReconParams,
+    r: usize,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let plan = ctx.plan(job, params)?;
+    let store = ctx.store(job);
+    let outcome = graph::region_step(&plan, &store, r, progress).map_err(recon_error)?;
+    let name = objects::name(job, &format!("region/{r}"));
+    ctx.block_on(objects::put(
+        &ctx.res.objects,
+        &name,
+        &encode_region(&outcome),
+    ))?;
+    let (done, total) = mark_done(ctx, job, r, true)?;
+    if done < total {
+        return ctx.update_job(job, |v| {
+            set_stage(v, Stage::Polygonize, done as f64 / total as f64)
+        });
+    }
+    ctx.update_job(job, |v| set_stage(v, Stage::Post, 0.0))?;
+    Ok(ctx.block_on(queue::publish(
+        &ctx.res.js,
+        &[Task {
+            job,
+            kind: TaskKind::Merge,
+        }],
+    ))?)
+}
+
+fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskError> {
+    let job = rec.view.id;
+    let plan = ctx.plan(job, params)?;
+    let store = ctx.store(job);
+    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
+    let (dag, _) = dag.ok_or_else(|| TaskError::Retry(format!("job {job}: no graph state")))?;
+    let get = |key: String| {
+        let name = objects::name(job, &key);
+        ctx.block_on(objects::get(&ctx.res.objects, &name))
+            .map(|b| (b, name))
+    };
+    let mut blocks = Vec::with_capacity(plan.blocks.len());
+    for b in 0..plan.blocks.len() {
+        let (bytes, name) = get(format!("block/{b}"))?;
+        blocks.push(
+            BlockOutcome::decode(&bytes, &name).map_err(|e| TaskError::Retry(e.to_string()))?,
+        );
+    }
+    let mut regions = Vec::with_capacity(plan.grid.regions.len());
+    for r in 0..plan.grid.regions.len() {
+        let (bytes, name) = get(format!("region/{r}"))?;
+        regions.push(decode_region(&bytes, &name).map_err(|e| TaskError::Retry(e.to_string()))?);
+    }
+    let blocks_peak = blocks
+        .iter()
+        .map(|b| b.report.peak_rss_mib)
+        .fold(0.0, f64::max);
+    let mut timings = Timings {
+        clean: dag.prepare_s,
+        polygonize: now_ms().saturating_sub(dag.regions_started_ms) as f64 / 1000.0,
+        ..Default::default()
+    };
+    let (reports, matrix) = graph::merge_blocks(blocks, &mut timings);
+    let (mesh, poly, residual) = graph::weld_step(&plan, &store, &regions).map_err(recon_error)?;
+    let age = unix_now().saturating_sub(rec.view.started_at.unwrap_or(rec.view.created_at));
+    let start = Instant::now()
+        .checked_sub(Duration::from_secs(age))
+        .unwrap_or_else(Instant::now);
+    let mut recon = tiled::finish(&plan, mesh, poly, residual, reports, matrix, timings, start)
+        .map_err(recon_error)?;
+    recon.report.memory.peak_rss_mib = recon.report.memory.peak_rss_mib.max(blocks_peak);
+    let dir = tempfile::tempdir().map_err(|e| TaskError::Retry(e.to_string()))?;
+    let meta = crate::io::MeshMeta::default();
+    let glb = MeshFormat::Glb(rec.options.glb());
+    crate::io::write_mesh_with(&dir.path().join("mesh.glb"), &recon.mesh, glb, &meta)
+        .map_err(|e| run_error(RunError::Write(e)))?;
+    let json = serde_json::to_vec_pretty(&recon.report).unwrap_or_default();
+    crate::io::write_atomic(&dir.path().join("report.json"), &json)
+        .map_err(|e| run_error(RunError::Write(e)))?;
+    let results = upload_results(ctx, job, dir.path())?;
+    let triangles = recon.mesh.triangles.len();
+    finish_job(ctx, job, Outcome::Succeeded { triangles, results })
+}
