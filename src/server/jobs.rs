@@ -248,19 +248,7 @@ impl JobManager {
         if let Some(b) = &self.backend {
             return self.submit_remote(b.as_ref(), input, info, options);
         }
-        let view = JobView {
-            id: Uuid::new_v4(),
-            status: JobStatus::Queued,
-            stage: None,
-            progress: 0.0,
-            stage_progress: 0.0,
-            created_at: unix_now(),
-            started_at: None,
-            finished_at: None,
-            error: None,
-            input: info,
-            triangles: None,
-        };
+        let view = JobView::queued(info);
         let mut queue = lock(&self.queue);
         if queue.len() >= self.cfg.max_queue {
             return Err(SubmitError::QueueFull);

@@ -70,6 +70,25 @@ pub struct JobView {
     pub triangles: Option<usize>,
 }
 
+impl JobView {
+    /// A job just accepted: a fresh id, queued, created now.
+    pub fn queued(input: InputInfo) -> JobView {
+        JobView {
+            id: Uuid::new_v4(),
+            status: JobStatus::Queued,
+            stage: None,
+            progress: 0.0,
+            stage_progress: 0.0,
+            created_at: unix_now(),
+            started_at: None,
+            finished_at: None,
+            error: None,
+            input,
+            triangles: None,
+        }
+    }
+}
+
 /// Unix time in whole seconds.
 pub fn unix_now() -> u64 {
     SystemTime::now()

@@ -5,7 +5,7 @@
 
 use super::config::ServerConfig;
 use super::jobs::{Job, JobManager, SubmitError, read, write};
-use super::model::{InputInfo, JobStatus, JobView, unix_now};
+use super::model::{InputInfo, JobView};
 use super::store::Store;
 use crate::params::ReconOptions;
 use std::collections::{HashMap, VecDeque};
@@ -55,19 +55,7 @@ impl JobManager {
         info: InputInfo,
         options: &ReconOptions,
     ) -> Result<Arc<Job>, SubmitError> {
-        let view = JobView {
-            id: Uuid::new_v4(),
-            status: JobStatus::Queued,
-            stage: None,
-            progress: 0.0,
-            stage_progress: 0.0,
-            created_at: unix_now(),
-            started_at: None,
-            finished_at: None,
-            error: None,
-            input: info,
-            triangles: None,
-        };
+        let view = JobView::queued(info);
         backend
             .submit(&view, input, options, &self.cfg)
             .map_err(SubmitError::Backend)?;
