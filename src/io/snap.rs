@@ -124,7 +124,9 @@ fn pick<T: Copy>(attr: &[T], source: &[usize], n: usize) -> Vec<T> {
 
 /// The merged vertices (new ids, groups of two or more) whose merge made a vertex non-manifold
 /// that was manifold before: a merged vertex itself, or the merged neighbours of a vertex whose
-/// fan broke. `before` caches the original mesh's per-vertex verdict.
+/// fan broke. Only vertices next to a merged group can break, so only their fans are checked;
+/// `before` caches the original mesh's verdict from the first round (later rounds merge less, so
+/// they touch a subset of those vertices).
 fn unsafe_groups(
     mesh: &TriMesh,
     triangles: &[[u32; 3]],
@@ -132,15 +134,20 @@ fn unsafe_groups(
     new_len: usize,
     before: &mut Option<Vec<bool>>,
 ) -> std::collections::HashSet<u32> {
-    let n = mesh.vertices.len();
-    let was_bad = before.get_or_insert_with(|| non_manifold_vertices(&mesh.triangles, n));
     let mut size = vec![0u32; new_len];
+    for &m in to {
+        size[m as usize] += 1;
+    }
+    let was_bad = before.get_or_insert_with(|| {
+        let grouped: Vec<bool> = to.iter().map(|&m| size[m as usize] > 1).collect();
+        non_manifold_vertices(&mesh.triangles, &next_to(&mesh.triangles, &grouped))
+    });
     let mut bad_member = vec![false; new_len];
     for (v, &m) in to.iter().enumerate() {
-        size[m as usize] += 1;
         bad_member[m as usize] |= was_bad[v];
     }
-    let now_bad = non_manifold_vertices(triangles, new_len);
+    let merged: Vec<bool> = size.iter().map(|&c| c > 1).collect();
+    let now_bad = non_manifold_vertices(triangles, &next_to(triangles, &merged));
     let mut blamed = std::collections::HashSet::new();
     for t in triangles {
         for (i, &m) in t.iter().enumerate() {
@@ -161,16 +168,34 @@ fn unsafe_groups(
     blamed
 }
 
-/// Per vertex: its fan is not one oriented disc or half-disc (a link vertex entered or left twice:
-/// a non-manifold or flipped edge; or the link in two or more pieces: a pinch).
-fn non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> Vec<bool> {
-    // Link edges a → b of every vertex (triangle [v, a, b] in its winding order), grouped by vertex.
+/// `marked` grown by every vertex that shares a triangle with a marked one.
+fn next_to(triangles: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
+    let mut out = marked.to_vec();
+    for t in triangles {
+        if t.iter().any(|&v| marked.get(v as usize) == Some(&true)) {
+            for &v in t {
+                if let Some(o) = out.get_mut(v as usize) {
+                    *o = true;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Per vertex (checked where `wanted`, else false): its fan is not one oriented disc or
+/// half-disc (a link vertex entered or left twice: a non-manifold or flipped edge; or the link in
+/// two or more pieces: a pinch).
+fn non_manifold_vertices(triangles: &[[u32; 3]], wanted: &[bool]) -> Vec<bool> {
+    let n = wanted.len();
+    // Link edges a → b of the wanted vertices (triangle [v, a, b] in its winding order), grouped by
+    // vertex.
     let mut start = vec![0usize; n + 1];
     let triangles: Vec<&[u32; 3]> = (triangles.iter())
         .filter(|t| t.iter().all(|&v| (v as usize) < n))
         .collect();
     for t in &triangles {
-        for &v in t.iter() {
+        for &v in t.iter().filter(|&&v| wanted[v as usize]) {
             start[v as usize + 1] += 1;
         }
     }
@@ -180,45 +205,46 @@ fn non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> Vec<bool> {
     let mut fill = start.clone();
     let mut link = vec![(0u32, 0u32); start[n]];
     for t in &triangles {
-        for i in 0..3 {
+        for i in (0..3).filter(|&i| wanted[t[i] as usize]) {
             let v = t[i] as usize;
             link[fill[v]] = (t[(i + 1) % 3], t[(i + 2) % 3]);
             fill[v] += 1;
         }
     }
     (0..n)
-        .map(|v| !is_disc(&link[start[v]..start[v + 1]]))
+        .map(|v| wanted[v] && !is_disc(&link[start[v]..start[v + 1]]))
         .collect()
 }
 
-/// Whether the oriented link edges form one cycle or one path.
+/// Whether the oriented link edges form one cycle or one path. A fan has a handful of edges, so
+/// linear scans beat hashing.
 fn is_disc(edges: &[(u32, u32)]) -> bool {
-    if edges.is_empty() {
+    let Some(&(first, _)) = edges.first() else {
         return true;
-    }
-    let mut next: HashMap<u32, u32> = HashMap::with_capacity(edges.len());
-    let mut has_in: HashMap<u32, ()> = HashMap::with_capacity(edges.len());
-    for &(a, b) in edges {
-        if next.insert(a, b).is_some() || has_in.insert(b, ()).is_some() {
+    };
+    let next = |a: u32| edges.iter().find(|e| e.0 == a).map(|e| e.1);
+    for (k, &(a, b)) in edges.iter().enumerate() {
+        let later = &edges[k + 1..];
+        if later.iter().any(|e| e.0 == a || e.1 == b) {
             return false;
         }
     }
     let starts: Vec<u32> = (edges.iter())
         .map(|e| e.0)
-        .filter(|a| !has_in.contains_key(a))
+        .filter(|&a| !edges.iter().any(|e| e.1 == a))
         .collect();
     if starts.len() > 1 {
         return false;
     }
-    let mut at = starts.first().copied().unwrap_or(edges[0].0);
+    let mut at = starts.first().copied().unwrap_or(first);
     let mut walked = 0;
-    while let Some(&b) = next.get(&at) {
+    while let Some(b) = next(at) {
         walked += 1;
         if walked > edges.len() {
             break;
         }
         at = b;
-        if starts.is_empty() && at == edges[0].0 {
+        if starts.is_empty() && at == first {
             break;
         }
     }
@@ -366,6 +392,10 @@ mod tests {
         let (to, source) = group(&keys, &vec![false; keys.len()]);
         assert_eq!(source.len(), 7);
         let pinched = remap_triangles(&mesh.triangles, &to);
-        assert!(non_manifold_vertices(&pinched, 7).iter().any(|&b| b));
+        assert!(
+            non_manifold_vertices(&pinched, &[true; 7])
+                .iter()
+                .any(|&b| b)
+        );
     }
 }

@@ -228,6 +228,8 @@ const FAR_FROM: f64 = 0.5;
 /// Distance from the data, in support radii, where the winding number starts to overrule planes
 /// that disagree with it (see [`LocalCarrier`]'s far field), and the width of that hand-over.
 const GUARD_FROM: f64 = 0.25;
+// The far field is evaluated from `GUARD_FROM` on, which must cover `FAR_FROM` too.
+const _: () = assert!(GUARD_FROM < FAR_FROM);
 const GUARD_WIDTH: f64 = 0.5;
 /// `|1 − 2w|` below which the guard is off and above which it is fully on (`w` within 0.2 /
 /// 0.05 of 0 or 1).
@@ -663,10 +665,7 @@ impl LocalCarrier {
         nearest: usize,
     ) -> (f64, Point3) {
         match &self.winding {
-            Some(w)
-                if d1 > GUARD_FROM.min(FAR_FROM) * self.radius
-                    && self.far_field.load(Ordering::Relaxed) =>
-            {
+            Some(w) if d1 > GUARD_FROM * self.radius && self.far_field.load(Ordering::Relaxed) => {
                 self.with_far_field::<GRAD>(x, local, w, d1, self.points[nearest])
             }
             _ => local,
