@@ -7,10 +7,12 @@
 mod aabb;
 mod normalize;
 pub mod pca;
+mod surround;
 pub mod synthetic;
 
 pub use aabb::Aabb;
 pub use normalize::Normalization;
+pub use surround::{largest_empty_cone, surround_cone};
 
 /// A point or vector in 3D (x, y, z).
 pub type Point3 = [f64; 3];

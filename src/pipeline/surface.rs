@@ -8,7 +8,10 @@
 //! data. It is decided on a coarse polygonization (a quarter of the resolution, ~1/16 of the
 //! triangles) without its floaters: when more than [`AUTO_TRIM_FRACTION`] of its area is farther
 //! than the support radius from every point, the carrier continues the data's own sheet far beyond
-//! them (an open scan) and the surface is trimmed; a closed object's unsupported patches are a tiny
+//! them (an open scan) and the surface is trimmed — unless the data surround their middle (every
+//! cone of directions wider than [`SURROUNDED_BELOW_DEG`] from the centroid or the box centre holds a
+//! point, [`surround_cone`]): then the unsupported part is holes in data taken all around (oceans on
+//! a globe, a sparse scan's gaps), which the carrier closes; a closed object's unsupported patches are a tiny
 //! part (bunny 10k: 0.03%), and the carrier's blobs away from the data are floaters, not counted.
 //! A coarse surface that is not closed inside the domain (a sheet of the carrier attached to the
 //! object runs out to the box, as on thin limbs) counts as open too: trimming removes that sheet,
@@ -28,7 +31,7 @@
 
 use super::FittedField;
 use crate::error::ReconError;
-use crate::geometry::{Aabb, TriMesh};
+use crate::geometry::{Aabb, TriMesh, surround_cone};
 use crate::mesh::simplify;
 use crate::mesh::{area, floaters, trim};
 use crate::params::{Boundary, ChordTolerance, ReconParams};
@@ -41,6 +44,11 @@ use rayon::prelude::*;
 /// Share of unsupported surface area above which `--boundary auto` trims: an open scan's
 /// extrapolated sheet is a large part of the surface; a closed scan's sparse patches are a tiny one.
 const AUTO_TRIM_FRACTION: f64 = 0.02;
+
+/// Widest empty cone (half-angle, degrees) below which the data count as taken all around the
+/// object ([`surround_cone`]): its unsupported surface is then holes to close, however much of it
+/// there is (measured: closed objects ≤ 17°, open scans and scenes ≥ 34°).
+const SURROUNDED_BELOW_DEG: f64 = 25.0;
 
 /// The coarse decision pass uses the resolution divided by this (at least [`COARSE_MIN`] cells).
 const COARSE_DIVISOR: usize = 4;
@@ -69,7 +77,7 @@ pub(crate) fn extract_surface(
         Boundary::Auto => {
             let share = unsupported_share(fit, params, domain, resolution, progress)?;
             s.unsupported_share = Some(share);
-            share > AUTO_TRIM_FRACTION
+            share > AUTO_TRIM_FRACTION && !surrounded(fit, &mut s)
         }
     };
     let pp = PolygonizeParams {
@@ -113,6 +121,14 @@ pub(crate) fn extract_surface(
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
     Ok((mesh, open, s))
+}
+
+/// Whether the data surround the object (an open-looking coarse surface is then closed); records
+/// the widest empty cone in the report. A coarse surface that leaves the domain is trimmed anyway.
+fn surrounded(fit: &FittedField, s: &mut PolygonizeReport) -> bool {
+    let cone = surround_cone(&fit.points).to_degrees();
+    s.empty_cone_deg = Some(cone);
+    cone < SURROUNDED_BELOW_DEG && s.unsupported_share.is_some_and(|share| share < 1.0)
 }
 
 /// Centroids sampled for the measured chord error (every k-th triangle beyond this many).

@@ -61,6 +61,8 @@ fn a_range_image_with_holes_gives_one_manifold_sheet_polygonized_in_the_band() {
     let (m, p) = (&rec.report.mesh, &rec.report.polygonize);
     assert_eq!(rec.report.params.boundary, "trim");
     assert!(p.unsupported_share.is_some_and(|s| s > 0.02), "{p:?}");
+    // Seen from its middle, the sheet leaves the space above and below it empty.
+    assert!(p.empty_cone_deg.is_some_and(|d| d > 60.0), "{p:?}");
     // One sheet with two holes: a disk minus two disks, χ = 1 − 2, three boundary loops.
     assert!(!m.watertight && m.manifold && m.oriented, "{m:?}");
     assert_eq!(
@@ -106,4 +108,45 @@ fn two_spheres_without_normals_stay_two_closed_components() {
     assert_eq!((m.components, m.genus), (2, Some(0)), "{m:?}");
     assert_eq!(rec.report.polygonize.floaters_removed, 0);
     assert_eq!(rec.report.params.boundary, "closed");
+}
+
+/// A sphere sampled only outside four wide caps ("oceans", 32–40° half-angle, about a third of
+/// the surface), without normals: the data are taken all around, so the holes are closed (the
+/// coarse pass finds far more than 2% of its surface unsupported, but no wide empty cone).
+#[test]
+fn a_sphere_with_wide_holes_all_round_is_closed_not_trimmed() {
+    let shape = Shape::by_name("sphere").unwrap();
+    let cloud = shape.sample(12_000, 5);
+    let caps: [([f64; 3], f64); 4] = [
+        ([0.0, 0.0, 1.0], 40.0),
+        ([1.0, 0.0, -0.3], 35.0),
+        ([-0.6, 0.8, -0.2], 32.0),
+        ([-0.3, -0.9, -0.4], 32.0),
+    ];
+    let c = rbfsurf::geometry::Aabb::from_points(&cloud.points).center();
+    let outside = |p: &[f64; 3]| {
+        let d: [f64; 3] = std::array::from_fn(|k| p[k] - c[k]);
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        caps.iter().all(|(a, deg)| {
+            let la = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            (d[0] * a[0] + d[1] * a[1] + d[2] * a[2]) / (l * la) < deg.to_radians().cos()
+        })
+    };
+    let points: Vec<[f64; 3]> = cloud.points.iter().copied().filter(outside).collect();
+    assert!(points.len() < 9_000, "{} points kept", points.len());
+    let rec = reconstruct(
+        &PointCloud {
+            points,
+            ..Default::default()
+        },
+        &ReconParams::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    let (m, p) = (&rec.report.mesh, &rec.report.polygonize);
+    assert!(p.unsupported_share.is_some_and(|s| s > 0.02), "{p:?}");
+    assert!(p.empty_cone_deg.is_some_and(|d| d < 25.0), "{p:?}");
+    assert_eq!(rec.report.params.boundary, "closed");
+    assert!(m.watertight && m.manifold, "{m:?}");
+    assert_eq!((m.components, m.genus), (1, Some(0)), "{m:?}");
 }
