@@ -238,7 +238,8 @@ fn start(
     };
     let cloud = crate::io::parse_point_cloud(&data, format, &limits)
         .map_err(|e| run_error(RunError::Read(e)))?;
-    match plan_execution(cloud.points.len() as u64, params).map_err(recon_error)? {
+    let n = cloud.points.len() as u64;
+    match plan_execution(n, params).map_err(recon_error)? {
         Execution::InMemory => {
             drop(cloud);
             whole(
@@ -254,8 +255,13 @@ fn start(
             )
         }
         Execution::OutOfCore(_) => {
-            drop(data);
-            prepare_graph(ctx, job, params, cloud, progress)
+            drop(cloud);
+            let input = crate::io::StreamInput::Bytes {
+                data: &data,
+                format,
+            };
+            let input = tiled::TiledInput::Stream(input, &limits);
+            prepare_graph(ctx, job, params, &input, n, progress)
         }
     }
 }
@@ -373,13 +379,13 @@ fn prepare_graph(
     ctx: &Ctx,
     job: Uuid,
     params: &ReconParams,
-    cloud: crate::geometry::PointCloud,
+    input: &tiled::TiledInput<'_>,
+    n: u64,
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
     let t = Instant::now();
-    let n = cloud.points.len() as u64;
     let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
-    if est.prepare_mib > params.max_memory_mib as f64 {
+    if est.peak_mib > params.max_memory_mib as f64 {
         let e = TiledError::OverBudget {
             points: n,
             mib: est.peak_mib,
@@ -393,7 +399,7 @@ fn prepare_graph(
         ..Default::default()
     };
     let store = ctx.store(job);
-    let plan = prepare::prepare(cloud, params, &options, est.block_points, &store, progress)
+    let plan = prepare::prepare(input, params, &options, est.block_points, &store, progress)
         .map_err(recon_error)?;
     let blob = plan.encode();
     ctx.block_on(objects::put(

@@ -21,6 +21,7 @@ mod obj;
 mod off;
 mod ply;
 mod snap;
+mod stream;
 mod text;
 mod write;
 
@@ -36,6 +37,7 @@ pub use glb::{
     GlbCompression, GlbOptions, decode_glb, encode_glb, encode_glb_with, glb_asset_extra, glb_crs,
 };
 pub use glb_anim::encode_animated_glb;
+pub use stream::{PointChunk, PointChunks, StreamInput, stream_points};
 pub use write::{lod_path, write_atomic, write_mesh, write_mesh_with, write_points_ply};
 
 use crate::geometry::{PointCloud, TriMesh};
@@ -205,20 +207,7 @@ pub(crate) const MEMORY_SOURCE: &str = "<input>";
 /// assert_eq!(pc.points.len(), 3);
 /// ```
 pub fn read_point_cloud(path: &Path, limits: &ReadLimits) -> Result<PointCloud, IoError> {
-    let (file, len) = open_limited(path, limits.max_bytes)?;
-    // `take` guards against files that grow while being read.
-    let mut r = BufReader::with_capacity(budget::READ_BUFFER_BYTES, file.take(len));
-    let head = r.fill_buf().map_err(|source| IoError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let format = detect_point_format(path, head)?;
-    if head.len() as u64 >= len && head.trim_ascii().is_empty() {
-        return Err(IoError::Empty {
-            path: path.to_path_buf(),
-            what: "file is empty".into(),
-        });
-    }
+    let (mut r, len, format) = open_point_file(path, limits)?;
     let pc = match format {
         PointFormat::Ply => ply::read_ply_points(r, len, limits, path, ply::CHUNK_BYTES)?,
         PointFormat::Xyz | PointFormat::Pts | PointFormat::Csv => {
@@ -247,6 +236,48 @@ pub fn read_point_cloud(path: &Path, limits: &ReadLimits) -> Result<PointCloud, 
     non_empty(pc, format, path)
 }
 
+/// A buffered reader over the point file `path`, its size in bytes and its format; refuses
+/// (before reading the body) files over `limits.max_bytes`, empty files and unknown formats.
+fn open_point_file(
+    path: &Path,
+    limits: &ReadLimits,
+) -> Result<(BufReader<std::io::Take<std::fs::File>>, u64, PointFormat), IoError> {
+    let (file, len) = open_limited(path, limits.max_bytes)?;
+    // `take` guards against files that grow while being read.
+    let mut r = BufReader::with_capacity(budget::READ_BUFFER_BYTES, file.take(len));
+    let head = r.fill_buf().map_err(|source| IoError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let format = detect_point_format(path, head)?;
+    if head.len() as u64 >= len && head.trim_ascii().is_empty() {
+        return Err(IoError::Empty {
+            path: path.to_path_buf(),
+            what: "file is empty".into(),
+        });
+    }
+    Ok((r, len, format))
+}
+
+/// Refuses in-memory point data over `limits.max_bytes` or without any content.
+fn check_bytes(bytes: &[u8], limits: &ReadLimits, src: &Path) -> Result<(), IoError> {
+    let len = bytes.len() as u64;
+    if len > limits.max_bytes {
+        return Err(IoError::TooLarge {
+            path: src.to_path_buf(),
+            bytes: len,
+            limit: limits.max_bytes,
+        });
+    }
+    if bytes.trim_ascii().is_empty() {
+        return Err(IoError::Empty {
+            path: src.to_path_buf(),
+            what: "file is empty".into(),
+        });
+    }
+    Ok(())
+}
+
 /// Parses an in-memory point cloud of a known format (errors name the source `<input>`).
 /// The same streaming readers as [`read_point_cloud`] run over the slice.
 ///
@@ -269,20 +300,8 @@ fn parse_point_cloud_named(
     limits: &ReadLimits,
     src: &Path,
 ) -> Result<PointCloud, IoError> {
+    check_bytes(bytes, limits, src)?;
     let len = bytes.len() as u64;
-    if len > limits.max_bytes {
-        return Err(IoError::TooLarge {
-            path: src.to_path_buf(),
-            bytes: len,
-            limit: limits.max_bytes,
-        });
-    }
-    if bytes.trim_ascii().is_empty() {
-        return Err(IoError::Empty {
-            path: src.to_path_buf(),
-            what: "file is empty".into(),
-        });
-    }
     let pc = match format {
         PointFormat::Ply => ply::read_ply_points(bytes, len, limits, src, ply::CHUNK_BYTES)?,
         PointFormat::Xyz | PointFormat::Pts | PointFormat::Csv => {

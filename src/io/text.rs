@@ -24,8 +24,9 @@ use std::io::{BufRead, Read};
 use std::path::Path;
 
 use super::budget::{CountSource, check_reader_memory, estimate_lines, points_within_budget};
+use super::stream::{PointSink, VecSink};
 use super::{IoError, PointFormat, ReadLimits};
-use crate::geometry::{Point3, PointCloud};
+use crate::geometry::PointCloud;
 
 /// Column indices of the used fields.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -107,18 +108,20 @@ fn columns_from_header(names: &[&[u8]], fmt: &'static str, src: &Path) -> Result
     Ok(Columns { xyz, normals })
 }
 
-/// Accumulates rows; owns the limit checks and error context.
-struct Sink<'a> {
-    points: Vec<Point3>,
-    normals: Vec<Point3>,
-    /// Most points the memory budget allows: without, with normals.
+/// Hands rows to a [`PointSink`]; owns the limit checks and error context.
+struct Sink<'a, 's> {
+    out: &'s mut dyn PointSink,
+    /// Rows handed on so far.
+    count: u64,
+    /// Most points the memory budget allows: without, with normals (checked only when the sink
+    /// holds its points).
     budget_points: [u64; 2],
     limits: &'a ReadLimits,
     src: &'a Path,
     fmt: &'static str,
 }
 
-impl Sink<'_> {
+impl Sink<'_, '_> {
     fn err(&self, line: usize, message: String) -> IoError {
         IoError::Parse {
             path: self.src.to_path_buf(),
@@ -137,22 +140,18 @@ impl Sink<'_> {
             );
             return Err(self.err(line, msg));
         }
-        if self.points.len() >= self.limits.max_points {
+        if self.count >= self.limits.max_points as u64 {
             return Err(IoError::TooManyPoints {
                 path: self.src.to_path_buf(),
-                declared: self.points.len() as u64 + 1,
+                declared: self.count + 1,
                 limit: self.limits.max_points,
             });
         }
         let with_normals = c.normals.is_some();
-        let next = self.points.len() as u64 + 1;
-        if next > self.budget_points[usize::from(with_normals)] {
+        let next = self.count + 1;
+        if self.out.holds_points() && next > self.budget_points[usize::from(with_normals)] {
             let counted = CountSource::ReadSoFar;
             check_reader_memory(next, with_normals, counted, self.limits, self.src)?;
-        }
-        if with_normals && self.normals.capacity() < self.points.capacity() {
-            self.normals
-                .reserve_exact(self.points.capacity() - self.normals.len());
         }
         let get = |k: usize| {
             parse_f64(toks[k]).ok_or_else(|| {
@@ -165,9 +164,8 @@ impl Sink<'_> {
             Some(n) => Some([get(n[0])?, get(n[1])?, get(n[2])?]),
             None => None,
         };
-        self.points.push(p);
-        self.normals.extend(n);
-        Ok(())
+        self.count = next;
+        self.out.push(p, n)
     }
 }
 
@@ -185,19 +183,25 @@ fn recycle<'a>(mut v: Vec<&[u8]>) -> Vec<&'a [u8]> {
     v.into_iter().map(|_| &[][..]).collect()
 }
 
-impl<'a> Sink<'a> {
-    /// An empty sink with room for `estimate` points plus 5 % (within the point and memory
-    /// limits): one allocation when the estimate holds.
-    fn new(estimate: u64, limits: &'a ReadLimits, src: &'a Path, format: PointFormat) -> Self {
+impl<'a, 's> Sink<'a, 's> {
+    /// A sink over `out`; a sink that holds its points gets room for `estimate` points plus 5 %
+    /// (within the point and memory limits): one allocation when the estimate holds.
+    fn new(
+        estimate: u64,
+        limits: &'a ReadLimits,
+        src: &'a Path,
+        format: PointFormat,
+        out: &'s mut dyn PointSink,
+    ) -> Self {
         let budget_points = [
             points_within_budget(limits, false),
             points_within_budget(limits, true),
         ];
         let cap = budget_points[0].min(limits.max_points as u64);
-        let reserve = estimate.saturating_add(estimate / 20 + 16).min(cap);
+        out.reserve(estimate.saturating_add(estimate / 20 + 16).min(cap) as usize);
         Sink {
-            points: Vec::with_capacity(reserve as usize),
-            normals: Vec::new(),
+            out,
+            count: 0,
             budget_points,
             limits,
             src,
@@ -244,12 +248,27 @@ const MAX_LINE: u64 = 16 << 20;
 /// Reads XYZ / PTS / CSV text as described in the module docs from `r`, whose total size is
 /// `len` bytes (used to estimate the point count from the first 64 KiB).
 pub(crate) fn read_text_points<R: BufRead>(
-    mut r: R,
+    r: R,
     len: u64,
     format: PointFormat,
     limits: &ReadLimits,
     src: &Path,
 ) -> Result<PointCloud, IoError> {
+    let mut out = VecSink::default();
+    let has_normals = read_text_into(r, len, format, limits, src, &mut out)?;
+    Ok(out.into_cloud(has_normals))
+}
+
+/// [`read_text_points`] handing each row to `out` as it is parsed; returns whether the rows
+/// carry normals.
+pub(crate) fn read_text_into<R: BufRead>(
+    mut r: R,
+    len: u64,
+    format: PointFormat,
+    limits: &ReadLimits,
+    src: &Path,
+    out: &mut dyn PointSink,
+) -> Result<bool, IoError> {
     let head = r.fill_buf().map_err(|source| IoError::Read {
         path: src.to_path_buf(),
         source,
@@ -259,6 +278,7 @@ pub(crate) fn read_text_points<R: BufRead>(
         limits,
         src,
         format,
+        out,
     );
     let mut cols: Option<Columns> = None;
     let mut first = true;
@@ -308,17 +328,13 @@ pub(crate) fn read_text_points<R: BufRead>(
         sink.push_row(&toks, &c, line_no)?;
         spare = recycle(toks);
     }
-    let has_normals = cols.is_some_and(|c| c.normals.is_some());
-    Ok(PointCloud {
-        points: sink.points,
-        normals: has_normals.then_some(sink.normals),
-        ..Default::default()
-    })
+    Ok(cols.is_some_and(|c| c.normals.is_some()))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Point3;
     use crate::io::parse_point_cloud;
 
     fn read(s: &str, f: PointFormat) -> Result<PointCloud, IoError> {

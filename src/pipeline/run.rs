@@ -6,8 +6,8 @@
 
 use crate::error::{ErrorKind, ReconError};
 use crate::io::{
-    IoError, MeshFormat, MeshMeta, PointFormat, ReadLimits, parse_point_cloud, peek_point_count,
-    read_point_cloud, write_atomic, write_mesh_with,
+    IoError, MeshFormat, MeshMeta, PointFormat, ReadLimits, StreamInput, parse_point_cloud,
+    peek_point_count, read_point_cloud, write_atomic, write_mesh_with,
 };
 use crate::params::ReconParams;
 use crate::progress::{Progress, Stage};
@@ -109,6 +109,34 @@ impl RunError {
     }
 }
 
+/// The task graph over `source`, streamed (never read whole); a read error mid-stream is the
+/// reader's own [`RunError::Read`].
+fn out_of_core(
+    source: PointSource<'_>,
+    params: &ReconParams,
+    limits: &ReadLimits,
+    output: &RunOutput<'_>,
+    progress: &dyn Progress,
+) -> Result<super::Reconstruction, RunError> {
+    use super::tiled::{TiledError, TiledInput, TiledOptions, reconstruct_tiled_from};
+    let recon_err = |e: ReconError| match e {
+        ReconError::Tiled(TiledError::Read(io)) => RunError::Read(io),
+        e => RunError::Reconstruct {
+            input: source.name(),
+            source: e,
+        },
+    };
+    if output.field.is_some() {
+        return Err(recon_err(TiledError::Unsupported("--save-field").into()));
+    }
+    let input = match source {
+        PointSource::File(path) => StreamInput::File(path),
+        PointSource::Bytes { data, format } => StreamInput::Bytes { data, format },
+    };
+    let input = TiledInput::Stream(input, limits);
+    reconstruct_tiled_from(&input, params, &TiledOptions::default(), progress).map_err(recon_err)
+}
+
 /// Reconstruct the points of `source` with `params` under `limits` (the reader's point, byte and
 /// memory limits; `params.max_memory_mib` also bounds the reconstruction) and write the mesh and
 /// report to `output`. A cancellation noticed by any stage returns a [`RunError`] of kind
@@ -128,19 +156,6 @@ pub fn run(
     };
     params.validate().map_err(|e| recon_err(e.into()))?;
     progress.stage(Stage::Read);
-    let cloud = match source {
-        PointSource::File(path) => {
-            // Refuse a scan whose points alone cannot fit the budget before reading it.
-            let hint = peek_point_count(path).map_err(RunError::Read)?;
-            hint.check_budget(limits, path).map_err(RunError::Read)?;
-            super::plan_execution(hint.points, params).map_err(recon_err)?;
-            read_point_cloud(path, limits).map_err(RunError::Read)?
-        }
-        PointSource::Bytes { data, format } => {
-            parse_point_cloud(data, format, limits).map_err(RunError::Read)?
-        }
-    };
-    let read_s = start.elapsed().as_secs_f64();
     if output.field.is_some() && params.method != crate::params::Method::Csrbf {
         return Err(recon_err(ReconError::Params(crate::params::ParamError {
             name: "method",
@@ -148,23 +163,41 @@ pub fn run(
             expected: "csrbf when saving the field (--save-field): the global methods have no saved form",
         })));
     }
-    let execution = super::plan_execution(cloud.points.len() as u64, params).map_err(recon_err)?;
-    let (mut rec, field) = match execution {
-        super::Execution::InMemory => {
+    let cloud = match source {
+        PointSource::File(path) => {
+            // Decide from the header's count before reading: a scan over the budget is streamed
+            // out of core and never read whole; one whose points alone cannot fit is refused.
+            let hint = peek_point_count(path).map_err(RunError::Read)?;
+            let execution = super::plan_execution(hint.points, params).map_err(recon_err)?;
+            if let super::Execution::OutOfCore(_) = execution {
+                None
+            } else {
+                hint.check_budget(limits, path).map_err(RunError::Read)?;
+                Some(read_point_cloud(path, limits).map_err(RunError::Read)?)
+            }
+        }
+        PointSource::Bytes { data, format } => {
+            Some(parse_point_cloud(data, format, limits).map_err(RunError::Read)?)
+        }
+    };
+    let read_s = start.elapsed().as_secs_f64();
+    let in_memory = match &cloud {
+        Some(c) => {
+            super::plan_execution(c.points.len() as u64, params).map_err(recon_err)?
+                == super::Execution::InMemory
+        }
+        None => false,
+    };
+    let (mut rec, field) = match cloud {
+        Some(cloud) if in_memory => {
             let rec = super::reconstruct_keeping_field(&cloud, params, progress);
             drop(cloud);
             rec.map_err(recon_err)?
         }
-        super::Execution::OutOfCore(_) => {
-            if output.field.is_some() {
-                return Err(recon_err(
-                    super::tiled::TiledError::Unsupported("--save-field").into(),
-                ));
-            }
-            let options = super::tiled::TiledOptions::default();
-            let rec = super::tiled::reconstruct_tiled(cloud, params, &options, progress)
-                .map_err(recon_err)?;
-            (rec, None)
+        cloud => {
+            // The points (if read) are dropped: the task graph streams the input again.
+            drop(cloud);
+            (out_of_core(source, params, limits, output, progress)?, None)
         }
     };
     super::check_cancel(progress).map_err(recon_err)?;

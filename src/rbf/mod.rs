@@ -19,7 +19,7 @@ pub use field::{Correction, RbfField, Spline, SplineLevel, linear_poly};
 pub use kernel::Kernel;
 pub use levels::{LevelPlan, plan_levels};
 pub use noise::{NoiseEstimate, estimate_noise};
-pub use pou::{BlockPlan, Blocks, PouBlock, plan_blocks};
+pub use pou::{BlockPlan, Blocks, PouBlock, plan_blocks, plan_leaves};
 pub use support::{Support, SupportEstimate, estimate_support};
 
 /// Errors of the RBF stages (support choice, assembly).

@@ -132,16 +132,7 @@ impl PouBlock {
 /// Split the bounding cube of `points` (centred on their box) (normalised units) into octree leaves of at most
 /// `max_points` points (depth ≤ 10), and gather each non-empty leaf's members within `overlap`.
 pub fn plan_blocks(points: &[Point3], max_points: usize, overlap: f64) -> Vec<BlockPlan> {
-    let bb = Aabb::from_points(points);
-    let edge = bb.extent().iter().fold(0.0f64, |a, &b| a.max(b)).max(1e-9) * (1.0 + 1e-9);
-    let c = bb.center();
-    let root = Aabb {
-        min: c.map(|v| v - 0.5 * edge),
-        max: c.map(|v| v + 0.5 * edge),
-    };
-    let mut leaves = Vec::new();
-    let all: Vec<u32> = (0..points.len() as u32).collect();
-    split(points, root, all, max_points.max(1), 0, &mut leaves);
+    let leaves = plan_leaves(points, &Aabb::from_points(points), max_points, false);
     leaves
         .into_par_iter()
         .map(|core| {
@@ -158,16 +149,53 @@ pub fn plan_blocks(points: &[Point3], max_points: usize, overlap: f64) -> Vec<Bl
         .collect()
 }
 
-/// Recursive octree split; a point on a shared face goes to the lower child.
-fn split(
+/// The octree leaves of [`plan_blocks`] over the cube centred on `bounds` (normalised units)
+/// with edge its longest side: split until a leaf holds at most `max_points` of `points` (depth
+/// ≤ 10), in depth-first order. With `keep_empty` the empty children of a split cell are leaves
+/// too, so the leaves tile the cube (when `points` is a subsample of the cloud in `bounds`, every
+/// point of the cloud is in a leaf); otherwise they are left out.
+pub fn plan_leaves(
     points: &[Point3],
-    cell: Aabb,
-    inside: Vec<u32>,
+    bounds: &Aabb,
     max_points: usize,
-    depth: usize,
-    leaves: &mut Vec<Aabb>,
-) {
+    keep_empty: bool,
+) -> Vec<Aabb> {
+    let edge = bounds
+        .extent()
+        .iter()
+        .fold(0.0f64, |a, &b| a.max(b))
+        .max(1e-9)
+        * (1.0 + 1e-9);
+    let c = bounds.center();
+    let root = Aabb {
+        min: c.map(|v| v - 0.5 * edge),
+        max: c.map(|v| v + 0.5 * edge),
+    };
+    let mut leaves = Vec::new();
+    let all: Vec<u32> = (0..points.len() as u32).collect();
+    let rule = Split {
+        points,
+        max_points: max_points.max(1),
+        keep_empty,
+    };
+    split(&rule, root, all, 0, &mut leaves);
+    leaves
+}
+
+/// What the octree split compares against.
+struct Split<'a> {
+    points: &'a [Point3],
+    max_points: usize,
+    keep_empty: bool,
+}
+
+/// Recursive octree split; a point on a shared face goes to the lower child.
+fn split(rule: &Split<'_>, cell: Aabb, inside: Vec<u32>, depth: usize, leaves: &mut Vec<Aabb>) {
+    let (points, max_points) = (rule.points, rule.max_points);
     if inside.is_empty() {
+        if rule.keep_empty && depth > 0 {
+            leaves.push(cell);
+        }
         return;
     }
     if inside.len() <= max_points || depth >= 10 {
@@ -195,7 +223,7 @@ fn split(
             min: [x.0, y.0, z.0],
             max: [x.1, y.1, z.1],
         };
-        split(points, child, kid, max_points, depth + 1, leaves);
+        split(rule, child, kid, depth + 1, leaves);
     }
 }
 

@@ -147,3 +147,173 @@ fn run_goes_out_of_core_when_the_budget_requires_and_refuses_what_it_cannot_do()
     );
     assert!(!mesh.exists());
 }
+
+/// A budget that sends 30,000 points out of core (the in-memory estimate is ~124 MiB).
+const TINY_BUDGET_MIB: u64 = 110;
+
+/// `run` on the point file `input` within `budget` MiB, writing the PLY mesh `mesh`.
+fn run_file(
+    input: &std::path::Path,
+    mesh: &std::path::Path,
+    budget: u64,
+) -> Result<rbfsurf::pipeline::RunSummary, rbfsurf::pipeline::RunError> {
+    let params = ReconParams {
+        max_memory_mib: budget,
+        ..Default::default()
+    };
+    let output = rbfsurf::pipeline::RunOutput {
+        mesh,
+        format: rbfsurf::io::MeshFormat::Ply,
+        report: None,
+        field: None,
+        job_memory_mib: None,
+    };
+    let source = rbfsurf::pipeline::PointSource::File(input);
+    rbfsurf::pipeline::run(source, &params, &Default::default(), &output, &NoProgress)
+}
+
+/// Whether `run` streams `path` out of core within `budget` (decided from the header's count).
+fn streams(path: &std::path::Path, budget: u64) -> bool {
+    let hint = rbfsurf::io::peek_point_count(path).unwrap();
+    let params = ReconParams {
+        max_memory_mib: budget,
+        ..Default::default()
+    };
+    matches!(
+        rbfsurf::pipeline::plan_execution(hint.points, &params),
+        Ok(rbfsurf::pipeline::Execution::OutOfCore(_))
+    )
+}
+
+#[test]
+fn a_streamed_torus_under_a_tiny_budget_is_closed_genus_one_and_close_to_the_in_memory_mesh() {
+    let shape = Shape::by_name("torus").unwrap();
+    let cloud = shape.sample(30_000, 3);
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("torus.ply");
+    rbfsurf::io::write_points_ply(&input, &cloud).unwrap();
+    assert!(streams(&input, TINY_BUDGET_MIB));
+    let mesh = dir.path().join("torus-mesh.ply");
+    let summary = run_file(&input, &mesh, TINY_BUDGET_MIB).unwrap();
+    let r = &summary.report;
+    assert!(r.blocks.len() >= 4, "{} blocks", r.blocks.len());
+    assert!(
+        r.mesh.watertight && r.mesh.manifold && r.mesh.components == 1,
+        "{:?}",
+        r.mesh
+    );
+    assert_eq!(r.mesh.genus, Some(1));
+    assert_eq!(r.input.points, 30_000);
+    let in_memory = rbfsurf::reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    let streamed = rbfsurf::io::read_mesh(&mesh).unwrap();
+    let d = rbfsurf::mesh::compare::compare(
+        &streamed,
+        rbfsurf::mesh::compare::Reference::Mesh(&in_memory.mesh),
+        &Default::default(),
+    )
+    .unwrap();
+    assert!(d.chamfer_rel < 1e-4, "{d:?}");
+    let err = common::max_vertex_error(&streamed, |p| shape.signed_distance(p));
+    assert!(err < 0.01, "max vertex error {err}");
+}
+
+#[test]
+fn bad_input_mid_stream_is_the_readers_own_error_and_leaves_no_output() {
+    let shape = Shape::by_name("torus").unwrap();
+    let cloud = shape.sample(30_000, 5);
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("out.ply");
+    // A junk line after 30,000 good rows.
+    let mut text = String::new();
+    let normals = cloud.normals.as_ref().unwrap();
+    for (p, n) in cloud.points.iter().zip(normals) {
+        text.push_str(&format!(
+            "{} {} {} {} {} {}\n",
+            p[0], p[1], p[2], n[0], n[1], n[2]
+        ));
+    }
+    text.push_str("1.0 junk 2.0 0 0 1\n");
+    let xyz = dir.path().join("junk.xyz");
+    std::fs::write(&xyz, &text).unwrap();
+    // A binary PLY cut short.
+    let ply = dir.path().join("cut.ply");
+    rbfsurf::io::write_points_ply(&ply, &cloud).unwrap();
+    let bytes = std::fs::read(&ply).unwrap();
+    std::fs::write(&ply, &bytes[..bytes.len() - 1000]).unwrap();
+    for input in [&xyz, &ply] {
+        assert!(streams(input, TINY_BUDGET_MIB), "{input:?}");
+        let e = run_file(input, &mesh, TINY_BUDGET_MIB).unwrap_err();
+        let whole = rbfsurf::io::read_point_cloud(input, &Default::default()).unwrap_err();
+        assert!(
+            matches!(e, rbfsurf::pipeline::RunError::Read(_)),
+            "{input:?}: {e}"
+        );
+        assert_eq!(e.to_string(), whole.to_string(), "{input:?}");
+        assert!(!mesh.exists(), "{input:?}: no output");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(left.len(), 2, "only the two inputs are left");
+    }
+    assert!(e_line(&xyz).contains(":30001:"), "{}", e_line(&xyz));
+}
+
+/// The streamed error's text for `path`.
+fn e_line(path: &std::path::Path) -> String {
+    run_file(path, &path.with_extension("ply.out"), TINY_BUDGET_MIB)
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn the_shipped_scans_get_the_in_memory_support_noise_and_surface_through_the_streamed_prepare() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    for (name, block) in [
+        ("kitten.ply", 1500),
+        ("bunny_cgal_10k.ply", 2500),
+        ("bunny_cgal.ply", 10_000),
+    ] {
+        let cloud = rbfsurf::io::read_point_cloud(&data.join(name), &Default::default()).unwrap();
+        let params = ReconParams {
+            blocks: rbfsurf::rbf::Blocks::MaxPoints(block),
+            ..Default::default()
+        };
+        let memory = rbfsurf::reconstruct(&cloud, &params, &NoProgress).unwrap();
+        let options = TiledOptions {
+            block_points: Some(block),
+            ..Default::default()
+        };
+        let streamed = reconstruct_tiled(cloud, &params, &options, &NoProgress).unwrap();
+        let (m, s) = (&memory.report.params, &streamed.report.params);
+        let d = rbfsurf::mesh::compare::compare(
+            &streamed.mesh,
+            rbfsurf::mesh::compare::Reference::Mesh(&memory.mesh),
+            &Default::default(),
+        )
+        .unwrap();
+        eprintln!(
+            "{name}: blocks {} / {}; support {:.6e} / {:.6e}; sigma/spacing {:.4} / {:.4}; \
+             lambda {:.3e} / {:.3e}; chamfer {:.2e}, hausdorff {:.2e}",
+            streamed.report.blocks.len(),
+            memory.report.matrix.blocks,
+            s.support,
+            m.support,
+            s.noise.sigma_over_spacing,
+            m.noise.sigma_over_spacing,
+            s.smoothing,
+            m.smoothing,
+            d.chamfer_rel,
+            d.hausdorff_rel
+        );
+        assert!(
+            (s.support / m.support - 1.0).abs() < 0.05,
+            "{name}: support"
+        );
+        assert_eq!(s.noise.noisy, m.noise.noisy, "{name}: noise");
+        let sm = &streamed.report.mesh;
+        assert!(
+            sm.watertight && sm.components == memory.report.mesh.components,
+            "{name}"
+        );
+        assert_eq!(sm.genus, memory.report.mesh.genus, "{name}");
+        assert!(d.chamfer_rel < 1e-3, "{name}: {d:?}");
+    }
+}

@@ -32,8 +32,9 @@ use body::{AsciiBody, BinBody};
 use header::{Element, Encoding, Header, PropKind, read_header};
 
 use super::budget::{CountSource, check_reader_memory};
+use super::stream::{PointSink, VecSink};
 use super::{IoError, ReadLimits};
-use crate::geometry::{Point3, PointCloud, TriMesh};
+use crate::geometry::{PointCloud, TriMesh};
 
 /// Bytes read from the input at a time (64 KiB); vertex records are decoded from this buffer.
 pub(crate) const CHUNK_BYTES: usize = 64 << 10;
@@ -43,13 +44,6 @@ pub(crate) const CHUNK_BYTES: usize = 64 << 10;
 enum Want {
     Points,
     Mesh,
-}
-
-/// Points, optional normals and (for [`Want::Mesh`]) fan-triangulated faces.
-struct PlyContent {
-    points: Vec<Point3>,
-    normals: Option<Vec<Point3>>,
-    triangles: Vec<[u32; 3]>,
 }
 
 /// What [`walk::walk`] keeps: the vertex element's index, its column slots, and the target.
@@ -69,12 +63,22 @@ pub(crate) fn read_ply_points<R: BufRead>(
     src: &Path,
     chunk: usize,
 ) -> Result<PointCloud, IoError> {
-    let c = read_ply(r, len, limits, src, Want::Points, chunk)?;
-    Ok(PointCloud {
-        points: c.points,
-        normals: c.normals,
-        ..Default::default()
-    })
+    let mut out = VecSink::default();
+    let (has_normals, _) = read_ply_into(r, len, limits, src, Want::Points, chunk, &mut out)?;
+    Ok(out.into_cloud(has_normals))
+}
+
+/// Reads the `vertex` element of a PLY stream into `out`, record by record (other elements
+/// skipped); returns whether the vertices carry normals. The reader's memory check applies only
+/// when `out` holds the points.
+pub(crate) fn stream_ply_points<R: BufRead>(
+    r: R,
+    len: u64,
+    limits: &ReadLimits,
+    src: &Path,
+    out: &mut dyn PointSink,
+) -> Result<bool, IoError> {
+    read_ply_into(r, len, limits, src, Want::Points, CHUNK_BYTES, out).map(|(n, _)| n)
 }
 
 /// Reads `vertex` + `face` (`vertex_indices` or `vertex_index` list) as a triangle mesh.
@@ -84,9 +88,12 @@ pub(crate) fn read_ply_mesh(
     src: &Path,
 ) -> Result<TriMesh, IoError> {
     let len = bytes.len() as u64;
-    let c = read_ply(bytes, len, limits, src, Want::Mesh, CHUNK_BYTES)?;
+    let mut out = VecSink::default();
+    let (has_normals, triangles) =
+        read_ply_into(bytes, len, limits, src, Want::Mesh, CHUNK_BYTES, &mut out)?;
+    let c = out.into_cloud(has_normals);
     let n = c.points.len();
-    if let Some(bad) = c.triangles.iter().flatten().find(|&&i| i as usize >= n) {
+    if let Some(bad) = triangles.iter().flatten().find(|&&i| i as usize >= n) {
         return Err(IoError::Invalid {
             path: src.to_path_buf(),
             format: "PLY",
@@ -104,7 +111,7 @@ pub(crate) fn read_ply_mesh(
     Ok(TriMesh {
         vertices: c.points,
         normals,
-        triangles: c.triangles,
+        triangles,
         colors: Vec::new(),
     })
 }
@@ -196,14 +203,17 @@ fn check_body_size(h: &Header, body_len: u64, src: &Path) -> Result<(), IoError>
     Ok(())
 }
 
-fn read_ply<R: BufRead>(
+/// Reads the header, checks the declared counts, and walks the body handing the vertices to
+/// `out`; returns whether they carry normals and the faces' fan triangles (for [`Want::Mesh`]).
+fn read_ply_into<R: BufRead>(
     mut r: R,
     len: u64,
     limits: &ReadLimits,
     src: &Path,
     want: Want,
     chunk: usize,
-) -> Result<PlyContent, IoError> {
+    out: &mut dyn PointSink,
+) -> Result<(bool, Vec<[u32; 3]>), IoError> {
     let (h, header_len) = read_header(&mut r, src)?;
     let vi = vertex_element(&h, src)?;
     let count = h.elements[vi].count;
@@ -222,20 +232,26 @@ fn read_ply<R: BufRead>(
             what: "PLY header declares 0 vertices".into(),
         });
     }
-    if want == Want::Points {
+    if want == Want::Points && out.holds_points() {
         check_reader_memory(count, has_normals, CountSource::Declared, limits, src)?;
     }
+    // Counts were checked against the limits and the body size, so this allocation is bounded.
+    out.reserve(count as usize);
     let plan = Plan {
         vertex: vi,
         slots: &slots,
         has_normals,
         want,
     };
-    match h.encoding {
-        Encoding::Ascii => walk::walk(&mut AsciiBody::new(r, h.body_line, chunk, src), &h, &plan),
+    let triangles = match h.encoding {
+        Encoding::Ascii => {
+            let mut body = AsciiBody::new(r, h.body_line, chunk, src);
+            walk::walk(&mut body, &h, &plan, out)?
+        }
         Encoding::BinaryLe | Encoding::BinaryBe => {
             let big = h.encoding == Encoding::BinaryBe;
-            walk::walk(&mut BinBody::new(r, big, chunk, src), &h, &plan)
+            walk::walk(&mut BinBody::new(r, big, chunk, src), &h, &plan, out)?
         }
-    }
+    };
+    Ok((has_normals, triangles))
 }

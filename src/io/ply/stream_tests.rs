@@ -7,6 +7,7 @@ use std::path::Path;
 
 use super::tests::{Spec, make_ply};
 use super::*;
+use crate::geometry::Point3;
 use crate::geometry::synthetic::SplitMix64;
 use crate::io::{PointFormat, parse_point_cloud, read_point_cloud};
 

@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use super::*;
+use crate::geometry::Point3;
 use crate::io::{PointFormat, parse_point_cloud};
 
 pub(super) fn splitmix(state: &mut u64) -> f64 {

@@ -6,18 +6,19 @@ use std::path::Path;
 
 use super::body::{At, Body, Field};
 use super::header::{Element, Header, PropKind, Scalar};
-use super::{Plan, PlyContent, Want};
+use super::{Plan, Want};
 use crate::io::IoError;
+use crate::io::stream::PointSink;
 
-/// Reads every element in file order, keeping what `plan` asks for.
-pub(super) fn walk<B: Body>(b: &mut B, h: &Header, plan: &Plan) -> Result<PlyContent, IoError> {
-    // Counts were checked against the limits and the body size, so this allocation is bounded.
-    let n = h.elements[plan.vertex].count as usize;
-    let mut out = PlyContent {
-        points: Vec::with_capacity(n),
-        normals: plan.has_normals.then(|| Vec::with_capacity(n)),
-        triangles: Vec::new(),
-    };
+/// Reads every element in file order, handing the vertices to `out` and returning the fan
+/// triangles of the faces (for [`Want::Mesh`]).
+pub(super) fn walk<B: Body>(
+    b: &mut B,
+    h: &Header,
+    plan: &Plan,
+    out: &mut dyn PointSink,
+) -> Result<Vec<[u32; 3]>, IoError> {
+    let mut triangles = Vec::new();
     for (ei, el) in h.elements.iter().enumerate() {
         let face_list = (plan.want == Want::Mesh && el.name == "face")
             .then(|| {
@@ -28,14 +29,14 @@ pub(super) fn walk<B: Body>(b: &mut B, h: &Header, plan: &Plan) -> Result<PlyCon
             })
             .flatten();
         if ei == plan.vertex {
-            read_vertices(b, el, plan, &mut out)?;
+            read_vertices(b, el, plan, out)?;
         } else if let Some(li) = face_list {
-            read_faces(b, el, li, &mut out.triangles)?;
+            read_faces(b, el, li, &mut triangles)?;
         } else {
             skip_element(b, el)?;
         }
     }
-    Ok(out)
+    Ok(triangles)
 }
 
 /// Byte layout of a vertex record without list properties: its size and the used fields.
@@ -58,7 +59,7 @@ fn read_vertices<B: Body>(
     b: &mut B,
     el: &Element,
     plan: &Plan,
-    out: &mut PlyContent,
+    out: &mut dyn PointSink,
 ) -> Result<(), IoError> {
     let layout = fixed_layout(el, plan.slots);
     for record in 0..el.count {
@@ -74,10 +75,8 @@ fn read_vertices<B: Body>(
         if !whole {
             read_vertex_values(b, el, plan.slots, &mut row, at)?;
         }
-        out.points.push([row[0], row[1], row[2]]);
-        if let Some(ns) = out.normals.as_mut() {
-            ns.push([row[3], row[4], row[5]]);
-        }
+        let normal = plan.has_normals.then_some([row[3], row[4], row[5]]);
+        out.push([row[0], row[1], row[2]], normal)?;
     }
     Ok(())
 }

@@ -2,24 +2,26 @@
 //! would not fit the memory budget.
 //!
 //! ```text
-//! prepare (once, whole cloud) ──► fit block b (one task per block) ──► polygonize region r ──► merge ──► post
-//!   clean, normalise, support,      points/{b} ─► spline/{b}             points within the        weld pieces by
-//!   noise, carrier, plan blocks                                           region's halo + the      position (seams
-//!   and regions, write points/{b}                                        splines that reach it    are bit-identical)
-//!                                                                        ─► piece/{r}
+//! prepare (streams the input) ──► fit block b (one task per block) ──► polygonize region r ──► merge ──► post
+//!   survey pass: count, box,        points/{b} ─► spline/{b}             points within the        weld pieces by
+//!   subsample; partition pass:                                            region's halo + the      position (seams
+//!   spill files; estimates on                                             splines that reach it    are bit-identical)
+//!   patches; write points/{b}                                             ─► piece/{r}
 //! ```
 //!
 //! Each task is a pure function of what it reads from the [`StoreKind`] store (in memory or a
 //! temporary directory) and writes one keyed result, so the executor is free to run tasks in any
 //! order, in parallel, again, or elsewhere. The local executor runs the block fits and the regions
 //! on a rayon pool of `concurrency` threads (chosen from the memory budget, see [`estimate`]), so at
-//! most that many block systems are alive at once. Both stores give the same mesh, whatever the
+//! most that many block systems are alive at once. The block size depends on the budget only,
+//! never on the executor's concurrency, so every executor makes the same plan. Both stores give the same mesh, whatever the
 //! region size (tested).
 //!
 //! Differences from the in-memory pipeline (documented in docs/large-scans.md): the surface is
 //! closed (`--boundary auto` is taken as closed; `trim` and `--outliers` are refused); the local
 //! carrier's far field is the winding number of a subsample of at most
-//! [`prepare::SAMPLE_POINTS`] points, which also counts the floaters' support; inputs need
+//! [`prepare::SAMPLE_POINTS`] points, which also counts the floaters' support and plans the
+//! blocks; the support and noise are measured on a few full-density blocks; inputs need
 //! consistent normals for the local carrier (no global reorientation); no vertex colours and no
 //! `--save-field`.
 
@@ -28,10 +30,13 @@ pub(crate) mod codec;
 pub(crate) mod graph;
 mod merge;
 pub(crate) mod prepare;
+mod route;
 pub mod store;
+mod survey;
 mod tasks;
 
 pub use store::{StoreError, StoreKind};
+pub use survey::TiledInput;
 
 use crate::error::{ErrorKind, ReconError};
 use crate::geometry::{PointCloud, TriMesh};
@@ -74,11 +79,11 @@ pub enum TiledError {
          leave it out or raise --max-memory-mib"
     )]
     Unsupported(&'static str),
-    /// Even out of core the cloud does not fit the budget.
+    /// Even out of core the reconstruction does not fit the budget.
     #[error(
-        "{points} points need about {mib:.0} MiB even out of core (the cleaning pass holds the \
-         cloud and one k-d tree, ~100 bytes per point), more than the memory budget of \
-         {budget_mib} MiB; subsample the scan or raise --max-memory-mib"
+        "{points} points need about {mib:.0} MiB even out of core (the subsample, the partition's \
+         buffers and the smallest block's system), more than the memory budget of {budget_mib} MiB; \
+         raise --max-memory-mib"
     )]
     OverBudget {
         /// Points in the input.
@@ -91,6 +96,15 @@ pub enum TiledError {
     /// The store of intermediate results failed.
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// Streaming the input failed (the readers' own error).
+    #[error(transparent)]
+    Read(crate::io::IoError),
+    /// More finite points than the 32-bit point ids number.
+    #[error(
+        "more than 4294967295 finite points: out-of-core reconstruction numbers points with 32-bit \
+         ids; split the scan"
+    )]
+    TooManyIds,
 }
 
 impl TiledError {
@@ -101,8 +115,9 @@ impl TiledError {
                 ErrorKind::Unreconstructable
             }
             TiledError::Unsupported(_) => ErrorKind::BadParameter,
-            TiledError::OverBudget { .. } => ErrorKind::OverBudget,
+            TiledError::OverBudget { .. } | TiledError::TooManyIds => ErrorKind::OverBudget,
             TiledError::Store(_) => ErrorKind::Internal,
+            TiledError::Read(e) => e.kind(),
         }
     }
 }
@@ -137,11 +152,12 @@ impl Default for TiledOptions {
 /// What an out-of-core run of `points` points costs, from the memory model below.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OutOfCoreEstimate {
-    /// Peak of the cleaning pass (cloud + one k-d tree), MiB.
+    /// Peak of prepare (the subsample, the partition's buffers, the patches, one block clean-up
+    /// per thread), MiB; bounded whatever the cloud's size.
     pub prepare_mib: f64,
-    /// Core points per block.
+    /// Core points per block: from the budget only, the same for every executor.
     pub block_points: usize,
-    /// Blocks fitted at once.
+    /// Blocks fitted at once on this executor.
     pub concurrency: usize,
     /// Peak of the block and region tasks, MiB.
     pub tasks_mib: f64,
@@ -149,45 +165,56 @@ pub struct OutOfCoreEstimate {
     pub peak_mib: f64,
 }
 
-/// Fixed cost, MiB: the process, the subsample (at most 400,000 points), the winding grid.
+/// Fixed cost, MiB: the process, the subsample (at most 400,000 points) and its k-d tree, the
+/// winding grid, the welded mesh.
 const FIXED_MIB: f64 = 100.0;
-/// Bytes per point of the cleaning pass: the cloud with normals (48), the k-d tree (~40), flags
-/// and the block plan (~12).
-const PREPARE_BYTES: f64 = 100.0;
-/// Bytes per point that stay resident after the cleaning pass (the allocator keeps the cloud's
-/// pages for reuse): measured at 10⁷ points, 565 MiB between block fits.
-const RETAINED_BYTES: f64 = 48.0;
-/// Bytes per core point of a block task: its point set with halo and overlap, the carrier's
-/// copies and trees, the system of its members. Measured at 10⁷ points: two blocks of up to
-/// 209,000 members at once rose ~1,040 MiB above the retained level (~2,500 B per member), and
-/// a block has ~1.25 members per core point.
-const TASK_BYTES: f64 = 3200.0;
+/// Bytes per point of the patches the support and noise are measured on (spilled records 52,
+/// positions and normals 48, the k-d tree ~40, flags), at most [`prepare::PATCH_POINTS`] points.
+const PATCH_BYTES: f64 = 160.0;
+/// Bytes per spilled point held in the partition's buffers (a record with normals), at most
+/// [`route::SPILL_BUFFER_BYTES`] in all.
+const SPILL_RECORD_BYTES: f64 = 52.0;
+/// Bytes per core point of turning a spill file into a block's point set: the records of its
+/// core and margin (~2.5 per core point, 52 B each), their k-d tree and the encoded set.
+const CONVERT_BYTES: f64 = 600.0;
+/// Bytes per planned core point of a block task: its point set with halo and overlap, the
+/// carrier's copies and trees, the system of its members. Measured at 10⁷ points with the
+/// streamed prepare: blocks planned at 235,000 core points (the largest had 208,987 members),
+/// two at once, peaked at 1,797 MiB — 3,786 B per planned core point above the fixed cost.
+const TASK_BYTES: f64 = 4000.0;
 /// Most core points per block (the in-memory block size).
 const MAX_BLOCK_POINTS: usize = 250_000;
 /// Fewest core points per block.
 const MIN_BLOCK_POINTS: usize = 1000;
-/// Blocks run at once only while each can still hold this many core points.
+/// Blocks are sized for two at once while each can still hold this many core points.
 const PARALLEL_BLOCK_POINTS: usize = 100_000;
+/// Blocks the plan sizes for when the budget allows [`PARALLEL_BLOCK_POINTS`] each.
+const PLAN_CONCURRENCY: f64 = 2.0;
 
 const MIB: f64 = (1u64 << 20) as f64;
 
-/// The out-of-core cost of `points` points within `budget_mib`, on a pool of `threads` threads:
-/// as many blocks at once (at most `threads`) as leave each at least 100,000 core points, each as
-/// large as fits (at most 250,000 core points).
+/// The out-of-core cost of `points` points within `budget_mib`, on an executor of `threads`
+/// threads. The block size is a function of the budget alone: as large as lets two blocks fit
+/// at once if each then holds at least 100,000 core points, else as large as one block fits (at
+/// most 250,000 core points). `threads` decides only how many blocks run at once (as many as
+/// fit, at most `threads`).
 pub fn estimate(points: u64, budget_mib: u64, threads: usize) -> OutOfCoreEstimate {
     let n = points as f64;
-    let prepare_mib = FIXED_MIB + n * PREPARE_BYTES / MIB;
-    let base = FIXED_MIB + n * RETAINED_BYTES / MIB;
-    let room = (budget_mib as f64 - base).max(0.0) * MIB;
-    let fits = |c: usize| room / (c as f64 * TASK_BYTES);
-    let concurrency = (1..=threads.max(1))
-        .rev()
-        .find(|&c| fits(c) >= PARALLEL_BLOCK_POINTS as f64)
-        .unwrap_or(1);
-    let block_points = (fits(concurrency) as usize)
-        .clamp(MIN_BLOCK_POINTS, MAX_BLOCK_POINTS)
-        .min((points as usize).max(MIN_BLOCK_POINTS));
-    let tasks_mib = base + concurrency as f64 * block_points as f64 * TASK_BYTES / MIB;
+    let room = (budget_mib as f64 - FIXED_MIB).max(0.0) * MIB;
+    let sized = |c: f64| room / (c * TASK_BYTES);
+    let block = if sized(PLAN_CONCURRENCY) >= PARALLEL_BLOCK_POINTS as f64 {
+        sized(PLAN_CONCURRENCY)
+    } else {
+        sized(1.0)
+    };
+    let block_points = (block as usize).clamp(MIN_BLOCK_POINTS, MAX_BLOCK_POINTS);
+    let concurrency =
+        ((room / (block_points as f64 * TASK_BYTES)) as usize).clamp(1, threads.max(1));
+    let blocks_at_once = concurrency as f64 * block_points as f64;
+    let spill = (n * SPILL_RECORD_BYTES).min(route::SPILL_BUFFER_BYTES as f64);
+    let patch = n.min(prepare::PATCH_POINTS as f64) * PATCH_BYTES;
+    let prepare_mib = FIXED_MIB + (spill + patch + blocks_at_once * CONVERT_BYTES) / MIB;
+    let tasks_mib = FIXED_MIB + blocks_at_once * TASK_BYTES / MIB;
     OutOfCoreEstimate {
         prepare_mib,
         block_points,
@@ -202,22 +229,41 @@ pub fn supports(params: &ReconParams) -> bool {
     prepare::check_supported(params).is_ok()
 }
 
-/// Reconstruct `cloud` (consumed: its memory is reused and freed early) through the task graph.
-/// The report has `blocks[]`; `timings_s.read` / `write` are left for the caller.
+/// Reconstruct `cloud` through the task graph (see [`reconstruct_tiled_from`]; the cloud is
+/// read like a stream, chunk by chunk, and dropped before the blocks are fitted).
 pub fn reconstruct_tiled(
     cloud: PointCloud,
     params: &ReconParams,
     options: &TiledOptions,
     progress: &dyn Progress,
 ) -> Result<super::Reconstruction, ReconError> {
+    reconstruct_tiled_from(&TiledInput::Cloud(&cloud), params, options, progress)
+}
+
+/// Reconstruct the points of `input` through the task graph without holding them: prepare
+/// streams the input (twice, or three times when the partition needs a wider margin) and
+/// writes the blocks' point sets to the store. The report has `blocks[]`; `timings_s.read` /
+/// `write` are left for the caller (`timings_s.clean` includes the reading).
+pub fn reconstruct_tiled_from(
+    input: &TiledInput<'_>,
+    params: &ReconParams,
+    options: &TiledOptions,
+    progress: &dyn Progress,
+) -> Result<super::Reconstruction, ReconError> {
     let start = Instant::now();
     params.validate()?;
-    let n = cloud.points.len() as u64;
+    // A stream's size is not known here: its caller checks the estimate against the budget
+    // with the count from the file's header ([`super::plan_execution`]); the block size and
+    // the concurrency do not depend on it.
+    let n = match input {
+        TiledInput::Cloud(c) => Some(c.points.len() as u64),
+        TiledInput::Stream(..) => None,
+    };
     let threads = options
         .concurrency
         .unwrap_or_else(rayon::current_num_threads);
-    let est = estimate(n, params.max_memory_mib, threads);
-    if est.prepare_mib > params.max_memory_mib as f64 {
+    let est = estimate(n.unwrap_or(0), params.max_memory_mib, threads);
+    if let Some(n) = n.filter(|_| est.peak_mib > params.max_memory_mib as f64) {
         return Err(TiledError::OverBudget {
             points: n,
             mib: est.peak_mib,
@@ -239,7 +285,8 @@ pub fn reconstruct_tiled(
     let store = Store::open(&options.store).map_err(TiledError::from)?;
     let mut timings = Timings::default();
     let t = Instant::now();
-    let plan = prepare::prepare(cloud, params, options, block_points, &store, progress)?;
+    let plan =
+        pool.install(|| prepare::prepare(input, params, options, block_points, &store, progress))?;
     timings.clean = t.elapsed().as_secs_f64();
     let (block_reports, matrix) = fit_all(
         &plan,
@@ -405,19 +452,35 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_estimate_fits_the_budget_and_uses_both_threads_when_blocks_stay_large() {
+    fn the_plan_depends_on_the_budget_not_the_executor_and_fits_it() {
+        for budget in [512, 1000, 1536, 8192] {
+            let one = estimate(10_000_000, budget, 1);
+            for threads in [2, 3, 8] {
+                let e = estimate(10_000_000, budget, threads);
+                assert_eq!(
+                    e.block_points, one.block_points,
+                    "{budget} MiB, {threads} threads"
+                );
+                assert!(
+                    e.concurrency <= threads && e.peak_mib <= budget as f64,
+                    "{e:?}"
+                );
+            }
+        }
         let e = estimate(10_000_000, 1536, 2);
         assert_eq!(e.concurrency, 2, "{e:?}");
-        assert!(
-            e.block_points >= 100_000 && e.block_points <= 250_000,
-            "{e:?}"
-        );
-        assert!(e.peak_mib <= 1536.0, "{e:?}");
-        // A small budget: one block at a time, smaller blocks, still within it.
-        let e = estimate(60_000, 130, 2);
+        assert!((150_000..=250_000).contains(&e.block_points), "{e:?}");
+        // Far below the cloud (10⁷ points with normals are 458 MiB): one block at a time.
+        let e = estimate(10_000_000, 512, 2);
         assert_eq!(e.concurrency, 1, "{e:?}");
-        assert!(e.peak_mib <= 130.0 && e.block_points < 60_000, "{e:?}");
-        // 10⁸ points: the cleaning pass alone is over 1.5 GiB.
-        assert!(estimate(100_000_000, 1536, 2).prepare_mib > 1536.0);
+        assert!(e.peak_mib <= 512.0 && e.block_points > 100_000, "{e:?}");
+        // Prepare no longer grows with the cloud.
+        let big = estimate(1_000_000_000, 1536, 2);
+        assert!((big.prepare_mib - e.prepare_mib).abs() < 200.0 && big.peak_mib <= 1536.0);
+        // The distributed test's small budget: blocks of ~2,600 core points, within it.
+        let e = estimate(30_000, 110, 2);
+        assert!(e.peak_mib <= 110.0 && e.block_points > 2000, "{e:?}");
+        // A budget that leaves no room for a block is refused.
+        assert!(estimate(10_000_000, 100, 2).peak_mib > 100.0);
     }
 }

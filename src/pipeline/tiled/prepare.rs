@@ -1,33 +1,57 @@
-//! The task graph's first step, run once over the whole cloud: clean (non-finite points,
-//! duplicates), normalise, choose the support and the smoothing, orient the carrier, plan the
-//! blocks and regions, and write every block's point set (its outer box and halo) to the store in
-//! one pass. What it keeps for later tasks is small: the plan, the boxes and a bounded subsample.
+//! The task graph's first step, run once over the input without holding it: two streaming
+//! passes and a clean-up per block.
 //!
-//! Memory: the cloud (48 bytes per point with normals, cleaned and normalised in place) plus one
-//! k-d tree over it (~40 bytes per point) while the support, the noise and the duplicates are
-//! measured; both are freed before any block is fitted. The global decisions are therefore the
-//! same as the in-memory pipeline's (same support estimate, noise estimate, duplicate rule).
+//! 1. **Survey** ([`super::survey`]): count, bounding box of the finite points, normals, and a
+//!    bounded deterministic subsample (at most [`SAMPLE_POINTS`], every `step`-th finite point).
+//!    From it: the normalisation, the duplicate tolerance, the block cores (the in-memory block
+//!    plan's octree rule over the subsample, each point standing for `step`), and rough support
+//!    and grid sizes (the subsample's spacing scaled to the full density) that give the margin
+//!    the partition writes around each core.
+//! 2. **Partition** ([`super::route`]): one more stream of the input appends every point to the
+//!    spill file of each block whose core plus margin contains it (bounded buffers).
+//! 3. **Estimates on full-density patches**: the points of a few blocks (at most
+//!    [`PATCH_POINTS`], spread over the block order), duplicates merged, give the surface test,
+//!    the normals' consistency, the support radius and the noise, with the in-memory pipeline's
+//!    own functions. The winding far field (and the normals' orientation) comes from the
+//!    subsample. Should the exact reach of a block (overlap, halo, tolerance) exceed the margin,
+//!    the partition is written again with a wider one.
+//! 4. **Blocks**: each spill file becomes the block's point set (duplicates merged by global id,
+//!    the same decision in every block), written to the store, and is removed.
+//!
+//! Memory: the subsample and its tree, the spill buffers, one patch and one block per thread —
+//! nothing proportional to the cloud.
 
-use super::store::{PointSet, Store};
+use super::route;
+use super::store::Store;
+use super::survey::{self, Survey, TiledInput};
 use super::tasks::{GridPlan, block_key};
 use super::{TiledError, TiledOptions};
 use crate::clean::{CleanStats, InputError, check_degenerate};
 use crate::error::ReconError;
-use crate::geometry::{Aabb, Normalization, Point3, PointCloud, normalized};
+use crate::geometry::{Aabb, Normalization, Point3};
 use crate::params::{Boundary, ReconParams, Smoothing};
 use crate::progress::{Progress, Stage};
 use crate::rbf::winding::WindingGrid;
 use crate::rbf::{
     Carrier, CarrierKind, NoiseEstimate, SupportEstimate, estimate_noise, estimate_support,
-    plan_blocks,
+    plan_leaves,
 };
-use crate::spatial::{IndexKind, SpatialIndex, build_index};
+use crate::spatial::{IndexKind, build_index};
 use rayon::prelude::*;
 use std::sync::Arc;
 
-/// Most points of the subsample that builds the winding far field and counts the floaters'
-/// support (every `⌈n / SAMPLE_POINTS⌉`-th cleaned point).
+/// Most points of the subsample that builds the winding far field, plans the blocks and counts
+/// the floaters' support.
 pub(crate) const SAMPLE_POINTS: usize = 400_000;
+
+/// Most points (with their blocks' margins) of the patches the estimates are made on.
+pub(crate) const PATCH_POINTS: usize = 1_000_000;
+
+/// Blocks the patches are taken from (spread over the block order).
+const PATCH_BLOCKS: usize = 4;
+
+/// How much wider than the rough reach the partition's margin is.
+const MARGIN_FACTOR: f64 = 1.25;
 
 /// Share of opposed neighbour normals above which the normals count as inconsistent (as in the
 /// in-memory pipeline, which then reorients them; that needs the whole cloud, so here it refuses).
@@ -62,7 +86,7 @@ pub(crate) struct BlockBox {
     pub members: usize,
 }
 
-/// Everything the tasks share, decided once over the whole cloud.
+/// Everything the tasks share, decided once by prepare.
 pub(crate) struct Plan {
     pub normalization: Normalization,
     pub support: SupportEstimate,
@@ -74,7 +98,8 @@ pub(crate) struct Plan {
     pub halo: f64,
     pub carrier: CarrierPlan,
     pub grid: GridPlan,
-    /// Every `step`-th cleaned point (normalised units), at most [`SAMPLE_POINTS`].
+    /// The survey's subsample (every `step`-th finite point, normalised units), at most
+    /// [`SAMPLE_POINTS`].
     pub sample: Vec<Point3>,
     /// Their normals (outwards, after any flip), when the input has normals: with the sample
     /// they rebuild the local carrier's far field wherever the plan is decoded.
@@ -99,131 +124,12 @@ pub(crate) fn check_supported(params: &ReconParams) -> Result<(), TiledError> {
     Ok(())
 }
 
-/// Clean and normalise `cloud` in place: drop non-finite points, make normals unit (zero where
-/// unusable). Returns the statistics so far and the transform.
-fn clean_in_place(cloud: &mut PointCloud) -> Result<(CleanStats, Normalization), ReconError> {
-    let total = cloud.points.len();
-    if total == 0 {
-        return Err(InputError::Empty.into());
-    }
-    cloud.colors = None;
-    cloud.intensity = None;
-    if cloud.normals.as_ref().is_some_and(|n| n.len() != total) {
-        cloud.normals = None;
-    }
-    let finite: Vec<bool> = (cloud.points.par_iter())
-        .map(|p| p.iter().all(|v| v.is_finite()))
-        .collect();
-    let mut k = 0;
-    cloud.points.retain(|_| {
-        k += 1;
-        finite[k - 1]
-    });
-    if let Some(n) = &mut cloud.normals {
-        let mut k = 0;
-        n.retain(|_| {
-            k += 1;
-            finite[k - 1]
-        });
-    }
-    drop(finite);
-    if cloud.points.is_empty() {
-        return Err(InputError::NoFinitePoints { total }.into());
-    }
-    let mut invalid = 0;
-    if let Some(n) = &mut cloud.normals {
-        for v in n.iter_mut() {
-            *v = normalized(*v).unwrap_or_else(|| {
-                invalid += 1;
-                [0.0; 3]
-            });
-        }
-        if invalid == n.len() {
-            cloud.normals = None;
-        }
-    }
-    let normalization = Normalization::from_aabb(&Aabb::from_points(&cloud.points));
-    let stats = CleanStats {
-        points: total,
-        used: cloud.points.len(),
-        dropped_non_finite: total - cloud.points.len(),
-        has_normals: cloud.normals.is_some(),
-        invalid_normals: invalid,
-        ..Default::default()
-    };
-    Ok((stats, normalization))
-}
-
-/// Drop every point with an earlier point within `tol` (the in-memory cleaning's rule).
-/// Returns how many were dropped; `index` is rebuilt when any was.
-fn merge_duplicates(
-    cloud: &mut PointCloud,
-    index: &mut Box<dyn SpatialIndex + Send>,
-    tol: f64,
-) -> Result<usize, ReconError> {
-    let pts = &cloud.points;
-    let keep: Vec<bool> = (0..pts.len())
-        .into_par_iter()
-        .map_init(Vec::new, |hits, i| {
-            index.within(&pts[i], tol, hits);
-            !hits.iter().any(|&h| (h as usize) < i)
-        })
-        .collect();
-    let dropped = keep.iter().filter(|k| !**k).count();
-    if dropped == 0 {
-        return Ok(0);
-    }
-    let mut k = 0;
-    cloud.points.retain(|_| {
-        k += 1;
-        keep[k - 1]
-    });
-    if let Some(n) = &mut cloud.normals {
-        let mut k = 0;
-        n.retain(|_| {
-            k += 1;
-            keep[k - 1]
-        });
-    }
-    *index = build_index(&cloud.points, IndexKind::KdTree, 16)?;
-    Ok(dropped)
-}
-
-/// The global checks and estimates that need the k-d tree: surface test, normals' consistency,
-/// support and noise (the same functions as the in-memory pipeline, over all points).
-fn survey(
-    points: &[Point3],
-    normals: Option<&[Point3]>,
-    index: &dyn SpatialIndex,
-    params: &ReconParams,
-) -> Result<(SupportEstimate, NoiseEstimate), ReconError> {
-    let knn = |p: &Point3, k: usize, out: &mut Vec<(u32, f64)>| index.nearest_k(p, k, out);
-    let thickness = crate::geometry::pca::surface_thickness(points, knn);
-    if thickness > MAX_SURFACE_THICKNESS {
-        return Err(InputError::NotASurface {
-            n: points.len(),
-            thickness,
-        }
-        .into());
-    }
-    if let Some(n) = normals {
-        let share = crate::normals::inconsistent_fraction(points, n, 8, knn);
-        if share > INCONSISTENT_NORMALS {
-            return Err(TiledError::InconsistentNormals { share }.into());
-        }
-    }
-    let support = estimate_support(points, index, params.support)?;
-    let noise = estimate_noise(points, support.spacing, knn);
-    Ok((support, noise))
-}
-
-/// The carrier plan: analytic solids fitted to all points; the local carrier's far field from
+/// The carrier plan: analytic solids fitted to the subsample; the local carrier's far field from
 /// the subsample, whose winding integral also decides whether the normals point inwards (they
 /// are then flipped in `normals`). Returns the plan, the kind and whether it flipped.
 fn plan_carrier(
     points: &[Point3],
     normals: Option<&mut Vec<Point3>>,
-    step: usize,
     params: &ReconParams,
     radius: f64,
 ) -> Result<(CarrierPlan, CarrierKind, bool), ReconError> {
@@ -259,9 +165,7 @@ fn plan_carrier(
         },
         _ => {
             let normals = normals.ok_or(TiledError::NeedsNormals)?;
-            let sp: Vec<Point3> = points.iter().step_by(step).copied().collect();
-            let sn: Vec<Point3> = normals.iter().step_by(step).copied().collect();
-            let mut grid = crate::rbf::carrier::build_winding_grid(&sp, &sn, radius);
+            let mut grid = crate::rbf::carrier::build_winding_grid(points, normals, radius);
             let inward = grid.as_ref().is_some_and(|w| {
                 let (sum, abs) = w.sums();
                 abs > 0.0 && sum.abs() > 0.05 * abs && sum < 0.0
@@ -280,10 +184,230 @@ fn plan_carrier(
     }
 }
 
-/// Run the first step over `cloud` (consumed): see the module doc. Writes `points/{b}` for every
-/// block to `store`.
+/// The carrier the input allows: the local carrier (the default) needs normals.
+fn carrier_kind(params: &ReconParams, has_normals: bool) -> Result<CarrierKind, TiledError> {
+    match (params.carrier.kind, has_normals) {
+        (CarrierKind::Auto | CarrierKind::Local, true) => Ok(CarrierKind::Local),
+        (CarrierKind::Auto | CarrierKind::Local, false) => Err(TiledError::NeedsNormals),
+        (k, _) => Ok(k),
+    }
+}
+
+/// How far beyond its core a block's stored points must reach: the overlap (three coarsest
+/// support radii), the halo (three support radii and four grid cells `h`) and the duplicate
+/// tolerance `tol` (normalised units).
+fn reach(params: &ReconParams, radius: f64, h: f64, tol: f64) -> f64 {
+    3.0 * coarsest(params, radius) + 3.0 * radius + 4.0 * h + tol
+}
+
+/// The support radius of the coarsest level.
+fn coarsest(params: &ReconParams, radius: f64) -> f64 {
+    radius * (1u64 << (params.levels.max(1) - 1)) as f64
+}
+
+/// The support from the subsample, its radius (when chosen by neighbour count) and spacing
+/// scaled to the full density of a surface (`1/√step`): only the partition's margin uses it.
+fn rough_support(
+    sample: &[Point3],
+    step: usize,
+    params: &ReconParams,
+) -> Result<SupportEstimate, ReconError> {
+    let index = build_index(sample, IndexKind::KdTree, 16)?;
+    let mut s = estimate_support(sample, index.as_ref(), params.support)?;
+    let scale = 1.0 / (step as f64).sqrt();
+    if matches!(params.support, crate::rbf::Support::Neighbours(_)) {
+        s.radius *= scale;
+    }
+    s.spacing *= scale;
+    Ok(s)
+}
+
+/// The polygonizer's grid for a support estimate (the resolution from its spacing unless given).
+fn grid_for(
+    params: &ReconParams,
+    options: &TiledOptions,
+    bounds: &Aabb,
+    carrier: &CarrierPlan,
+    support: &SupportEstimate,
+) -> Result<GridPlan, ReconError> {
+    let resolution = params
+        .resolution
+        .unwrap_or_else(|| super::super::auto_resolution(support.spacing));
+    GridPlan::from_bounds(
+        *bounds,
+        carrier,
+        support.radius,
+        resolution,
+        options.region_cells,
+    )
+}
+
+/// A fresh directory for the spill files (next to the store's, or in `TMPDIR`).
+fn spill_dir(options: &TiledOptions) -> Result<tempfile::TempDir, ReconError> {
+    let parent = match &options.store {
+        super::StoreKind::TempDir(Some(p)) => p.clone(),
+        _ => std::env::temp_dir(),
+    };
+    (tempfile::Builder::new().prefix("rbfsurf-spill-"))
+        .tempdir_in(&parent)
+        .map_err(|source| {
+            TiledError::Store(super::StoreError::Io {
+                path: parent,
+                source,
+            })
+            .into()
+        })
+}
+
+/// The blocks the patches come from: up to [`PATCH_BLOCKS`] spread evenly over `alive` (the
+/// blocks with points), as many as keep the patches' points within [`PATCH_POINTS`] (one at least).
+fn pick_patches(alive: &[usize], spilled: &[usize]) -> Vec<usize> {
+    let m = alive.len();
+    let k = PATCH_BLOCKS.min(m);
+    let mut picks: Vec<usize> = Vec::new();
+    let mut total = 0;
+    for j in 0..k {
+        let b = alive[(2 * j + 1) * m / (2 * k)];
+        if picks.contains(&b) {
+            continue;
+        }
+        if !picks.is_empty() && total + spilled[b] > PATCH_POINTS {
+            break;
+        }
+        total += spilled[b];
+        picks.push(b);
+    }
+    picks
+}
+
+/// The surface test, the normals' consistency, the support and the noise, with the in-memory
+/// pipeline's functions, on the points of the patch blocks `picks` (their cores and margins,
+/// duplicates merged); the support radius is measured at the points of their cores (whose
+/// neighbourhoods the margins complete), the rest over all of the patch. `used` scales the
+/// support's non-zero estimate to the whole cloud.
+#[allow(clippy::too_many_arguments)]
+fn estimate_on_patches(
+    dir: &std::path::Path,
+    picks: &[usize],
+    cores: &[Aabb],
+    normals: bool,
+    tol: f64,
+    used: usize,
+    params: &ReconParams,
+) -> Result<(SupportEstimate, NoiseEstimate), ReconError> {
+    let mut recs = Vec::new();
+    for &b in picks {
+        recs.extend(route::read_spill(&route::spill_path(dir, b), normals)?);
+    }
+    recs.sort_unstable_by_key(|r| r.id);
+    recs.dedup_by_key(|r| r.id);
+    let keep = route::keep_flags(&recs, tol)?;
+    let kept: Vec<route::Record> = (recs.iter().zip(keep))
+        .filter(|(_, k)| *k)
+        .map(|(r, _)| *r)
+        .collect();
+    drop(recs);
+    let points: Vec<Point3> = kept.iter().map(|r| r.p).collect();
+    let index = build_index(&points, IndexKind::KdTree, 16)?;
+    let knn = |p: &Point3, k: usize, out: &mut Vec<(u32, f64)>| index.nearest_k(p, k, out);
+    let thickness = crate::geometry::pca::surface_thickness(&points, knn);
+    if thickness > MAX_SURFACE_THICKNESS {
+        let n = points.len();
+        return Err(InputError::NotASurface { n, thickness }.into());
+    }
+    if normals {
+        let ns: Vec<Point3> = kept.iter().map(|r| r.n).collect();
+        let share = crate::normals::inconsistent_fraction(&points, &ns, 8, knn);
+        if share > INCONSISTENT_NORMALS {
+            return Err(TiledError::InconsistentNormals { share }.into());
+        }
+    }
+    let core: Vec<Point3> = (points.iter())
+        .filter(|p| picks.iter().any(|&b| cores[b].contains(p)))
+        .copied()
+        .collect();
+    let mut support = estimate_support(&core, index.as_ref(), params.support)?;
+    support.estimated_nnz = support.mean_neighbours * used as f64;
+    let noise = estimate_noise(&points, support.spacing, knn);
+    Ok((support, noise))
+}
+
+/// The partition, written again with a wider margin when the exact reach needs it.
+struct Partition {
+    dir: tempfile::TempDir,
+    /// Provisional blocks with points in their cores, ascending.
+    alive: Vec<usize>,
+    support: SupportEstimate,
+    noise: NoiseEstimate,
+}
+
+/// Steps 2 and 3 of the module doc.
+#[allow(clippy::too_many_arguments)]
+fn partition(
+    input: &TiledInput<'_>,
+    s: &Survey,
+    cores: &[Aabb],
+    normalization: &Normalization,
+    margin: f64,
+    tol: f64,
+    exact_reach: impl Fn(&SupportEstimate) -> Result<f64, ReconError>,
+    params: &ReconParams,
+    options: &TiledOptions,
+) -> Result<Partition, ReconError> {
+    let dir = spill_dir(options)?;
+    let routed = route::route(
+        input,
+        cores,
+        margin,
+        normalization,
+        s.has_normals,
+        dir.path(),
+    )?;
+    let alive: Vec<usize> = (0..cores.len())
+        .filter(|&b| routed.core_points[b] > 0)
+        .collect();
+    let picks = pick_patches(&alive, &routed.spilled);
+    let (support, noise) = estimate_on_patches(
+        dir.path(),
+        &picks,
+        cores,
+        s.has_normals,
+        tol,
+        s.finite,
+        params,
+    )?;
+    let needed = exact_reach(&support)?;
+    if needed <= margin {
+        return Ok(Partition {
+            dir,
+            alive,
+            support,
+            noise,
+        });
+    }
+    drop(dir);
+    let dir = spill_dir(options)?;
+    let margin = MARGIN_FACTOR * needed;
+    route::route(
+        input,
+        cores,
+        margin,
+        normalization,
+        s.has_normals,
+        dir.path(),
+    )?;
+    Ok(Partition {
+        dir,
+        alive,
+        support,
+        noise,
+    })
+}
+
+/// Run the first step over `input` (see the module doc); writes `points/{b}` for every block to
+/// `store`. `block_points` bounds the core points per block.
 pub(crate) fn prepare(
-    mut cloud: PointCloud,
+    input: &TiledInput<'_>,
     params: &ReconParams,
     options: &TiledOptions,
     block_points: usize,
@@ -292,31 +416,52 @@ pub(crate) fn prepare(
 ) -> Result<Plan, ReconError> {
     check_supported(params)?;
     progress.stage(Stage::Clean);
-    let (mut clean, normalization) = clean_in_place(&mut cloud)?;
-    let tol = params.clean.merge_tolerance
-        * Aabb::from_points(&cloud.points).diagonal()
-        * normalization.scale;
-    cloud
-        .points
-        .par_iter_mut()
-        .for_each(|p| *p = normalization.forward(p));
+    let s = survey::survey(input, SAMPLE_POINTS)?;
+    let kind = carrier_kind(params, s.has_normals)?;
+    let normalization = Normalization::from_aabb(&s.bbox);
+    let tol = if params.clean.merge_tolerance > 0.0 {
+        (params.clean.merge_tolerance * s.bbox.diagonal() * normalization.scale)
+            .max(f64::MIN_POSITIVE)
+    } else {
+        0.0
+    };
+    let sample: Vec<Point3> = s.points.iter().map(|p| normalization.forward(p)).collect();
+    check_degenerate(&sample, s.has_normals)?;
+    let bounds = Aabb {
+        min: normalization.forward(&s.bbox.min),
+        max: normalization.forward(&s.bbox.max),
+    };
     super::super::check_cancel(progress)?;
     progress.stage(Stage::Index);
-    let mut index = build_index(&cloud.points, IndexKind::KdTree, 16)?;
-    if params.clean.merge_tolerance > 0.0 {
-        clean.merged_duplicates =
-            merge_duplicates(&mut cloud, &mut index, tol.max(f64::MIN_POSITIVE))?;
-        clean.used = cloud.points.len();
-    }
-    check_degenerate(&cloud.points, cloud.normals.is_some())?;
-    let (support, noise) = survey(
-        &cloud.points,
-        cloud.normals.as_deref(),
-        index.as_ref(),
+    // Analytic carriers do not depend on the support; the local one is built below.
+    let analytic = match kind {
+        CarrierKind::Sphere | CarrierKind::Ellipsoid => {
+            Some(plan_carrier(&sample, None, params, 1.0)?.0)
+        }
+        _ => None,
+    };
+    let placeholder = CarrierPlan::Local { winding: None };
+    let shape = analytic.as_ref().unwrap_or(&placeholder);
+    let exact_reach = |support: &SupportEstimate| -> Result<f64, ReconError> {
+        let grid = grid_for(params, options, &bounds, shape, support)?;
+        Ok(reach(params, support.radius, grid.h, tol))
+    };
+    let rough = rough_support(&sample, s.step, params)?;
+    let margin = MARGIN_FACTOR * exact_reach(&rough)?;
+    let cores = plan_leaves(&sample, &bounds, (block_points / s.step).max(1), true);
+    let part = partition(
+        input,
+        &s,
+        &cores,
+        &normalization,
+        margin,
+        tol,
+        exact_reach,
         params,
+        options,
     )?;
-    drop(index);
     super::super::check_cancel(progress)?;
+    let (support, noise) = (part.support, part.noise);
     let resolved = ReconParams {
         smoothing: Smoothing::Lambda(match params.smoothing {
             Smoothing::Auto => noise.lambda,
@@ -325,30 +470,31 @@ pub(crate) fn prepare(
         ..params.clone()
     };
     progress.stage(Stage::Carrier);
-    let n = cloud.points.len();
-    let step = n.div_ceil(SAMPLE_POINTS).max(1);
-    let (carrier, carrier_kind, normals_flipped) = plan_carrier(
-        &cloud.points,
-        cloud.normals.as_mut(),
-        step,
-        &resolved,
-        support.radius,
-    )?;
-    let resolution = params
-        .resolution
-        .unwrap_or_else(|| super::super::auto_resolution(support.spacing));
-    let grid = GridPlan::new(
-        &cloud.points,
-        &carrier,
-        support.radius,
-        resolution,
-        options.region_cells,
-    )?;
+    let mut sample_normals = s.has_normals.then(|| s.normals.clone());
+    let (carrier, carrier_kind, normals_flipped) =
+        plan_carrier(&sample, sample_normals.as_mut(), &resolved, support.radius)?;
+    let grid = grid_for(params, options, &bounds, &carrier, &support)?;
     let halo = 3.0 * support.radius + 4.0 * grid.h;
-    let blocks = partition(&cloud, &resolved, &support, block_points, halo, store)?;
-    let sample = cloud.points.iter().step_by(step).copied().collect();
-    let sample_normals =
-        (cloud.normals.as_ref()).map(|n| n.iter().step_by(step).copied().collect());
+    let overlap = 3.0 * coarsest(params, support.radius);
+    let out = BlockOutput {
+        dir: part.dir.path(),
+        cores: &cores,
+        overlap,
+        halo,
+        tol,
+        normals: s.has_normals,
+        flip: normals_flipped,
+    };
+    let (blocks, merged) = write_blocks(&out, &part.alive, store, progress)?;
+    let clean = CleanStats {
+        points: s.total,
+        used: s.finite - merged,
+        dropped_non_finite: s.total - s.finite,
+        merged_duplicates: merged,
+        has_normals: s.has_normals,
+        invalid_normals: s.invalid_normals,
+        ..Default::default()
+    };
     Ok(Plan {
         normalization,
         support,
@@ -366,40 +512,158 @@ pub(crate) fn prepare(
     })
 }
 
-/// Plan the blocks (octree leaves of at most `block_points` core points, overlap three coarsest
-/// support radii as in the in-memory block fit) and write each block's point set: every point
-/// within `halo` of its outer box, in global order.
-fn partition(
-    cloud: &PointCloud,
-    params: &ReconParams,
-    support: &SupportEstimate,
-    block_points: usize,
+/// What turning spill files into block point sets needs.
+struct BlockOutput<'a> {
+    dir: &'a std::path::Path,
+    /// The provisional cores (spill file `b` is core `b`'s).
+    cores: &'a [Aabb],
+    overlap: f64,
     halo: f64,
+    tol: f64,
+    normals: bool,
+    flip: bool,
+}
+
+/// Step 4: block `k` is the `k`-th of `alive`; its point set is every kept point within its
+/// outer box plus the halo. Returns the blocks and the duplicates merged in all.
+fn write_blocks(
+    out: &BlockOutput<'_>,
+    alive: &[usize],
     store: &Store,
-) -> Result<Vec<BlockBox>, ReconError> {
-    let levels = params.levels.max(1);
-    let coarsest = support.radius * (1u64 << (levels - 1)) as f64;
-    let plans = plan_blocks(&cloud.points, block_points, 3.0 * coarsest);
-    let mut blocks = Vec::with_capacity(plans.len());
-    for (b, plan) in plans.into_iter().enumerate() {
-        let reach = plan.outer.inflated(halo);
-        let ids: Vec<u32> = (0..cloud.points.len() as u32)
-            .into_par_iter()
-            .filter(|&i| reach.contains(&cloud.points[i as usize]))
-            .collect();
-        let set = PointSet {
-            points: ids.iter().map(|&i| cloud.points[i as usize]).collect(),
-            normals: (cloud.normals.as_ref()).map(|n| ids.iter().map(|&i| n[i as usize]).collect()),
-            ids,
-        };
-        store
-            .put(&block_key(b), set.encode())
-            .map_err(TiledError::from)?;
-        blocks.push(BlockBox {
-            core: plan.core,
-            outer: plan.outer,
-            members: plan.members.len(),
-        });
+    progress: &dyn Progress,
+) -> Result<(Vec<BlockBox>, usize), ReconError> {
+    let results: Vec<Result<(BlockBox, usize), ReconError>> = (alive.par_iter().enumerate())
+        .map(|(b, &prov)| {
+            super::super::check_cancel(progress)?;
+            let path = route::spill_path(out.dir, prov);
+            let records = route::read_spill(&path, out.normals)?;
+            let core = out.cores[prov];
+            let outer = core.inflated(out.overlap);
+            let reach = outer.inflated(out.halo);
+            let owns = |p: &Point3| out.cores.iter().position(|c| c.contains(p)) == Some(prov);
+            let (set, merged) =
+                route::finish_block(&records, &reach, out.tol, out.normals, out.flip, owns)?;
+            drop(records);
+            let _ = std::fs::remove_file(&path);
+            let members = set.points.iter().filter(|p| outer.contains(p)).count();
+            store
+                .put(&block_key(b), set.encode())
+                .map_err(TiledError::from)?;
+            Ok((
+                BlockBox {
+                    core,
+                    outer,
+                    members,
+                },
+                merged,
+            ))
+        })
+        .collect();
+    let mut blocks = Vec::with_capacity(results.len());
+    let mut merged = 0;
+    for r in results {
+        let (b, m) = r?;
+        blocks.push(b);
+        merged += m;
     }
-    Ok(blocks)
+    Ok((blocks, merged))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::store::{PointSet, StoreKind};
+    use super::*;
+    use crate::geometry::PointCloud;
+    use crate::progress::NoProgress;
+
+    /// A torus with a NaN point and duplicates (copies within a tenth of the tolerance) spread
+    /// over the cloud, so some fall in the blocks' overlaps.
+    fn cloud_with_duplicates() -> PointCloud {
+        let shape = crate::geometry::synthetic::Shape::by_name("torus").unwrap();
+        let mut cloud = shape.sample(4000, 9);
+        let normals = cloud.normals.as_mut().unwrap();
+        cloud.points[100] = [f64::NAN, 0.0, 0.0];
+        for i in (0..4000).step_by(37) {
+            let p = cloud.points[i];
+            cloud.points.push([p[0] + 1e-9, p[1], p[2] - 1e-9]);
+            normals.push(normals[i]);
+        }
+        cloud
+    }
+
+    #[test]
+    fn every_block_holds_exactly_the_kept_points_of_its_reach_and_duplicates_agree() {
+        let cloud = cloud_with_duplicates();
+        let params = ReconParams::default();
+        let options = TiledOptions {
+            store: StoreKind::Memory,
+            ..Default::default()
+        };
+        let store = Store::open(&options.store).unwrap();
+        let input = TiledInput::Cloud(&cloud);
+        let plan = prepare(&input, &params, &options, 500, &store, &NoProgress).unwrap();
+        assert!(plan.blocks.len() >= 8, "{} blocks", plan.blocks.len());
+        // Brute force over the whole cloud: ids among the finite points, the same transform and
+        // tolerance, and the in-memory rule (dropped when a lower id lies within the tolerance).
+        let finite: Vec<(Point3, Point3)> =
+            (cloud.points.iter().zip(cloud.normals.as_ref().unwrap()))
+                .filter(|(p, _)| p.iter().all(|v| v.is_finite()))
+                .map(|(p, n)| (plan.normalization.forward(p), *n))
+                .collect();
+        let bbox = Aabb::from_points(cloud.points.iter().filter(|p| p[0].is_finite()));
+        let tol = params.clean.merge_tolerance * bbox.diagonal() * plan.normalization.scale;
+        let d2 = |a: &Point3, b: &Point3| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
+        let keep: Vec<bool> = (0..finite.len())
+            .map(|i| !(0..i).any(|j| d2(&finite[j].0, &finite[i].0) <= tol * tol))
+            .collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        assert_eq!(dropped, 4000 / 37 + 1, "every copy is a duplicate");
+        assert_eq!(plan.clean.merged_duplicates, dropped);
+        assert_eq!(plan.clean.dropped_non_finite, 1);
+        assert_eq!(plan.clean.used, finite.len() - dropped);
+        let mut seen = vec![false; finite.len()];
+        for (b, block) in plan.blocks.iter().enumerate() {
+            let key = block_key(b);
+            let set = PointSet::decode(&store.get(&key).unwrap(), &key).unwrap();
+            let reach = block.outer.inflated(plan.halo);
+            let want: Vec<u32> = (0..finite.len() as u32)
+                .filter(|&i| keep[i as usize] && reach.contains(&finite[i as usize].0))
+                .collect();
+            assert_eq!(set.ids, want, "block {b}");
+            for (k, &id) in set.ids.iter().enumerate() {
+                let (p, n) = finite[id as usize];
+                assert_eq!(set.points[k], p, "block {b}, point {id}");
+                let unit = crate::geometry::normalized(n).unwrap();
+                let n = set.normals.as_ref().unwrap()[k];
+                let sign = if plan.normals_flipped { -1.0 } else { 1.0 };
+                assert_eq!(n, unit.map(|v| sign * v), "block {b}, normal {id}");
+                seen[id as usize] |= block.core.contains(&p);
+            }
+            let members = set
+                .points
+                .iter()
+                .filter(|p| block.outer.contains(p))
+                .count();
+            assert_eq!(block.members, members);
+        }
+        // Every kept point lies in some block's core.
+        assert!((0..finite.len()).all(|i| !keep[i] || seen[i]));
+    }
+
+    #[test]
+    fn the_subsample_plans_the_same_leaves_as_the_in_memory_rule_when_it_is_the_whole_cloud() {
+        let cloud = crate::geometry::synthetic::Shape::by_name("knot")
+            .unwrap()
+            .sample(6000, 4);
+        let norm = Normalization::from_aabb(&Aabb::from_points(&cloud.points));
+        let pts: Vec<Point3> = cloud.points.iter().map(|p| norm.forward(p)).collect();
+        let in_memory: Vec<Aabb> = (crate::rbf::plan_blocks(&pts, 700, 0.01).into_iter())
+            .map(|b| b.core)
+            .collect();
+        let leaves = plan_leaves(&pts, &Aabb::from_points(&pts), 700, true);
+        let non_empty: Vec<Aabb> = (leaves.into_iter())
+            .filter(|l| pts.iter().any(|p| l.contains(p)))
+            .collect();
+        assert_eq!(non_empty, in_memory);
+    }
 }

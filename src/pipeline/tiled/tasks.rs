@@ -62,17 +62,17 @@ pub(crate) struct GridPlan {
 }
 
 impl GridPlan {
-    /// The domain of a closed surface (the points and an analytic carrier's zero set, grown by
+    /// The domain of a closed surface (the points' box `bounds` and an analytic carrier's zero set, grown by
     /// one support radius plus three cells, as the in-memory pipeline does) and its regions of
     /// `region_cells` cells (rounded up to whole polygonizer blocks).
-    pub(crate) fn new(
-        points: &[Point3],
+    pub(crate) fn from_bounds(
+        bounds: Aabb,
         carrier: &CarrierPlan,
         radius: f64,
         resolution: usize,
         region_cells: usize,
     ) -> Result<GridPlan, ReconError> {
-        let mut b = Aabb::from_points(points);
+        let mut b = bounds;
         let analytic = match carrier {
             CarrierPlan::Sphere { center, radius } => Some(
                 Aabb {

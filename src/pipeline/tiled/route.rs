@@ -1,0 +1,278 @@
+//! Prepare's partition pass and the per-block clean-up after it.
+//!
+//! [`route`] streams the input once more and appends every finite point (with its global id and
+//! unit normal) to the spill file of each block whose core, inflated by a margin, contains it:
+//! buffered, append-only writes, at most [`SPILL_BUFFER_BYTES`] buffered in all. [`finish_block`]
+//! then turns one spill file into the block's stored point set: it merges duplicates with the
+//! in-memory cleaning's rule (a point is dropped when a point of lower id lies within the
+//! tolerance), which needs only the points within the tolerance of it — all in the file, since
+//! the margin covers the block's reach plus the tolerance — so every block that holds a point
+//! makes the same keep/drop decision for it.
+
+use super::TiledError;
+use super::store::{PointSet, StoreError};
+use super::survey::{TiledInput, finite, unit_normal};
+use crate::error::ReconError;
+use crate::geometry::{Aabb, Normalization, Point3};
+use crate::spatial::{IndexKind, build_index};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Bytes of spill buffers held at once over all blocks (64 MiB), bounded per block to
+/// 16 KiB – 1 MiB.
+pub(crate) const SPILL_BUFFER_BYTES: usize = 64 << 20;
+
+/// Cells per axis of the lookup grid from a point to the blocks that may hold it.
+const LOOKUP_CELLS: usize = 32;
+
+/// One spilled point: global id, position (normalised units), unit normal or zero.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Record {
+    pub id: u32,
+    pub p: Point3,
+    pub n: Point3,
+}
+
+/// Bytes of one record on disk: u32 id, 3 f64, and 3 f64 more with normals.
+fn record_bytes(normals: bool) -> usize {
+    if normals { 52 } else { 28 }
+}
+
+fn io_err(path: &Path, source: std::io::Error) -> ReconError {
+    TiledError::Store(StoreError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+    .into()
+}
+
+/// The spill file of provisional block `b` in `dir`.
+pub(crate) fn spill_path(dir: &Path, b: usize) -> PathBuf {
+    dir.join(format!("spill-{b}"))
+}
+
+/// From a point to the indices of the boxes that may contain it: a uniform grid over the boxes'
+/// union, each cell listing the boxes that meet it.
+struct Lookup {
+    min: Point3,
+    cell: f64,
+    cells: Vec<Vec<u32>>,
+}
+
+impl Lookup {
+    fn new(boxes: &[Aabb]) -> Lookup {
+        let mut all = Aabb::empty();
+        for b in boxes {
+            all.grow(&b.min);
+            all.grow(&b.max);
+        }
+        let edge = all
+            .extent()
+            .iter()
+            .fold(0.0f64, |a, &e| a.max(e))
+            .max(1e-12);
+        let cell = edge / LOOKUP_CELLS as f64;
+        let mut cells = vec![Vec::new(); LOOKUP_CELLS.pow(3)];
+        let index = |v: f64, k: usize| {
+            (((v - all.min[k]) / cell).floor().max(0.0) as usize).min(LOOKUP_CELLS - 1)
+        };
+        for (b, bx) in boxes.iter().enumerate() {
+            let lo = [0, 1, 2].map(|k| index(bx.min[k], k));
+            let hi = [0, 1, 2].map(|k| index(bx.max[k], k));
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        cells[(z * LOOKUP_CELLS + y) * LOOKUP_CELLS + x].push(b as u32);
+                    }
+                }
+            }
+        }
+        Lookup {
+            min: all.min,
+            cell,
+            cells,
+        }
+    }
+
+    /// The boxes whose cell holds `p` (a superset of those containing it; empty outside).
+    fn candidates(&self, p: &Point3) -> &[u32] {
+        let mut at = [0usize; 3];
+        for k in 0..3 {
+            let u = ((p[k] - self.min[k]) / self.cell).floor();
+            if !(u >= 0.0) {
+                return &[];
+            }
+            at[k] = (u as usize).min(LOOKUP_CELLS - 1);
+        }
+        &self.cells[(at[2] * LOOKUP_CELLS + at[1]) * LOOKUP_CELLS + at[0]]
+    }
+}
+
+/// What the partition pass wrote.
+pub(crate) struct Routed {
+    /// Points whose first containing core (lowest block index) is each block's, before merging.
+    pub core_points: Vec<usize>,
+    /// Records written per block.
+    pub spilled: Vec<usize>,
+}
+
+/// The partition pass: stream `input`, normalise each finite point (its id counts the finite
+/// points before it) and append it to the spill file in `dir` of every block whose `core`
+/// inflated by `margin` contains it.
+pub(crate) fn route(
+    input: &TiledInput<'_>,
+    cores: &[Aabb],
+    margin: f64,
+    normalization: &Normalization,
+    normals: bool,
+    dir: &Path,
+) -> Result<Routed, ReconError> {
+    let reach: Vec<Aabb> = cores.iter().map(|c| c.inflated(margin)).collect();
+    let lookup = Lookup::new(&reach);
+    let nb = cores.len();
+    let cap = (SPILL_BUFFER_BYTES / nb.max(1)).clamp(16 << 10, 1 << 20);
+    let mut buffers: Vec<Vec<u8>> = vec![Vec::new(); nb];
+    let mut routed = Routed {
+        core_points: vec![0; nb],
+        spilled: vec![0; nb],
+    };
+    let flush = |b: usize, buf: &mut Vec<u8>| -> Result<(), ReconError> {
+        let path = spill_path(dir, b);
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(|e| io_err(&path, e))?;
+        f.write_all(buf).map_err(|e| io_err(&path, e))?;
+        buf.clear();
+        Ok(())
+    };
+    let mut id = 0u32;
+    input.for_each_chunk(&mut |points, chunk_normals| {
+        for (i, p) in points.iter().enumerate() {
+            if !finite(p) {
+                continue;
+            }
+            let q = normalization.forward(p);
+            let n = chunk_normals.map_or([0.0; 3], |n| unit_normal(n[i]));
+            let mut owner = true;
+            for &b in lookup.candidates(&q) {
+                let b = b as usize;
+                if !reach[b].contains(&q) {
+                    continue;
+                }
+                if owner && cores[b].contains(&q) {
+                    routed.core_points[b] += 1;
+                    owner = false;
+                }
+                let buf = &mut buffers[b];
+                buf.extend_from_slice(&id.to_le_bytes());
+                let values = if normals { 6 } else { 3 };
+                for v in q.iter().chain(n.iter()).take(values) {
+                    buf.extend_from_slice(&v.to_le_bytes());
+                }
+                routed.spilled[b] += 1;
+                if buf.len() >= cap {
+                    flush(b, buf)?;
+                }
+            }
+            id = id.wrapping_add(1);
+        }
+        Ok(())
+    })?;
+    for (b, buf) in buffers.iter_mut().enumerate() {
+        if !buf.is_empty() {
+            flush(b, buf)?;
+        }
+    }
+    Ok(routed)
+}
+
+/// The records of a spill file (ascending id: the pass appends in input order); an absent
+/// file holds none.
+pub(crate) fn read_spill(path: &Path, normals: bool) -> Result<Vec<Record>, ReconError> {
+    let bytes = match std::fs::read(path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(io_err(path, e)),
+    };
+    let size = record_bytes(normals);
+    if bytes.len() % size != 0 {
+        return Err(TiledError::Store(StoreError::Corrupt {
+            key: path.display().to_string(),
+            what: "spill file of partial records",
+        })
+        .into());
+    }
+    let f = |c: &[u8], k: usize| {
+        f64::from_le_bytes(c[4 + 8 * k..12 + 8 * k].try_into().unwrap_or([0; 8]))
+    };
+    Ok(bytes
+        .chunks_exact(size)
+        .map(|c| Record {
+            id: u32::from_le_bytes(c[..4].try_into().unwrap_or([0; 4])),
+            p: [f(c, 0), f(c, 1), f(c, 2)],
+            n: if normals {
+                [f(c, 3), f(c, 4), f(c, 5)]
+            } else {
+                [0.0; 3]
+            },
+        })
+        .collect())
+}
+
+/// For each record, whether it survives the duplicate merge: no record of lower id within `tol`.
+/// Exact for every record whose `tol`-neighbourhood lies inside the records' region.
+pub(crate) fn keep_flags(records: &[Record], tol: f64) -> Result<Vec<bool>, ReconError> {
+    if tol <= 0.0 || records.is_empty() {
+        return Ok(vec![true; records.len()]);
+    }
+    let pts: Vec<Point3> = records.iter().map(|r| r.p).collect();
+    let index = build_index(&pts, IndexKind::KdTree, 16)?;
+    use rayon::prelude::*;
+    Ok((0..records.len())
+        .into_par_iter()
+        .map_init(Vec::new, |hits, i| {
+            index.within(&pts[i], tol, hits);
+            !hits.iter().any(|&h| records[h as usize].id < records[i].id)
+        })
+        .collect())
+}
+
+/// A block's stored point set from its spill records: the kept points within `reach`, in id
+/// order, normals negated when `flip`. Returns it with the count of dropped duplicates that
+/// `owns` (their first containing core is this block's).
+pub(crate) fn finish_block(
+    records: &[Record],
+    reach: &Aabb,
+    tol: f64,
+    normals: bool,
+    flip: bool,
+    owns: impl Fn(&Point3) -> bool,
+) -> Result<(PointSet, usize), ReconError> {
+    let near: Vec<Record> = (records.iter())
+        .filter(|r| reach.inflated(tol).contains(&r.p))
+        .copied()
+        .collect();
+    let keep = keep_flags(&near, tol)?;
+    let mut set = PointSet {
+        normals: normals.then(Vec::new),
+        ..Default::default()
+    };
+    let mut merged = 0;
+    for (r, keep) in near.iter().zip(keep) {
+        if !reach.contains(&r.p) {
+            continue;
+        }
+        if !keep {
+            merged += usize::from(owns(&r.p));
+            continue;
+        }
+        set.ids.push(r.id);
+        set.points.push(r.p);
+        if let Some(n) = set.normals.as_mut() {
+            n.push(if flip { r.n.map(|v| -v) } else { r.n });
+        }
+    }
+    Ok((set, merged))
+}
