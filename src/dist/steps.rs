@@ -88,10 +88,15 @@ impl Ctx {
     }
 
     fn store(&self, job: Uuid) -> Store {
+        self.recording_store(job, None)
+    }
+
+    fn recording_store(&self, job: Uuid, written: Option<Arc<Mutex<Vec<String>>>>) -> Store {
         Store::Remote(Box::new(JobObjects {
             os: self.res.objects.clone(),
             job,
             rt: self.rt.clone(),
+            written,
         }))
     }
 
@@ -176,7 +181,12 @@ pub fn run_task(ctx: &Ctx, task: Task, progress: &TaskProgress) -> Result<bool, 
     let Some(rec) = ctx.record(task.job)? else {
         return Ok(false);
     };
-    if rec.view.status.is_terminal() || rec.cancel {
+    if rec.view.status.is_terminal() {
+        return Ok(false);
+    }
+    if rec.cancel {
+        // Cancelled between tasks: the first task to see it ends the job (the others skip).
+        finish_job(ctx, task.job, Outcome::Failed(cancelled_error()))?;
         return Ok(false);
     }
     let params = ReconParams::try_from(&rec.options).map_err(|e| {
@@ -214,12 +224,7 @@ fn start(
     ]
     .contains(&rec.view.input.format.as_str())
     {
-        return Err(TaskError::Job(ErrorBody {
-            code: ErrorKind::BadParameter.code().into(),
-            message:
-                "composition and morph jobs run on the embedded service (serve without --nats)"
-                    .into(),
-        }));
+        return volume(ctx, rec, progress);
     }
     let data = ctx.block_on(objects::get(
         &ctx.res.objects,
@@ -306,6 +311,42 @@ fn whole(
     finish_job(ctx, rec.view.id, done)
 }
 
+/// A composition or morph job, whole on this worker (it is not block-parallel): the operands'
+/// saved fields come from their jobs' results in the object store, the mesh and report go to
+/// this job's results, as for a reconstruction.
+fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), TaskError> {
+    use crate::server::volume::{VolumeRequest, run_volume};
+    let job = rec.view.id;
+    let bytes = ctx.block_on(objects::get(
+        &ctx.res.objects,
+        &objects::name(job, &rec.view.input.file),
+    ))?;
+    let req = VolumeRequest::decode(&bytes).map_err(TaskError::Job)?;
+    let ids = req.validate().map_err(|message| {
+        TaskError::Job(ErrorBody {
+            code: ErrorKind::BadParameter.code().into(),
+            message,
+        })
+    })?;
+    let mut fields = std::collections::HashMap::new();
+    for op in ids {
+        let name = objects::name(op, "result/fitted.field");
+        if let Some(bytes) = ctx.block_on(objects::get_opt(&ctx.res.objects, &name))? {
+            fields.insert(op, (bytes, name));
+        }
+    }
+    let dir = tempfile::tempdir().map_err(|e| TaskError::Retry(e.to_string()))?;
+    let (mesh, report) = (dir.path().join("mesh.glb"), dir.path().join("report.json"));
+    let mut load = |op: Uuid| {
+        let (bytes, name) = fields.get(&op)?;
+        crate::frep::format::decode(bytes, name).ok()
+    };
+    let triangles =
+        run_volume(&req, &mut load, &mesh, &report, progress).map_err(TaskError::Job)?;
+    let results = upload_results(ctx, job, dir.path())?;
+    finish_job(ctx, job, Outcome::Succeeded { triangles, results })
+}
+
 /// Uploads every file of `dir` as `result/<file>`; returns the file names.
 fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<Vec<String>, TaskError> {
     let entries = std::fs::read_dir(dir).map_err(|e| TaskError::Retry(e.to_string()))?;
@@ -333,40 +374,72 @@ pub enum Outcome {
     Failed(ErrorBody),
 }
 
-/// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`) and
-/// drops its intermediate values.
+/// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`): the
+/// end is decided once, by compare-and-set on the record, and the call that decided it removes
+/// the job's intermediate values (the plan, the blocks' points, splines and outcomes, the pieces).
+/// Values a task still running elsewhere writes afterwards are removed with the job (expiry or
+/// DELETE), whose names come from the same graph state.
 pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskError> {
-    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
-    if let Some((d, _)) = dag {
-        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
-        ctx.block_on(objects::delete(&ctx.res.objects, job, &keys));
-    }
     let (status, error, triangles, results) = match outcome {
         Outcome::Succeeded { triangles, results } => {
             (JobStatus::Succeeded, None, Some(triangles), results)
         }
         Outcome::Failed(e) => (JobStatus::Failed, Some(e), None, Vec::new()),
     };
-    ctx.update_job(job, |r| {
-        r.results = results.clone();
-        let (status, error, triangles) = if r.cancel {
-            let e = ErrorBody {
-                code: "cancelled".into(),
-                message: "cancelled by a DELETE request".into(),
+    let (mut ended, mut discard) = (false, false);
+    ctx.block_on(records::update::<JobRecord, _>(
+        &ctx.res.jobs,
+        &job_key(job),
+        |r| {
+            ended = !r.view.status.is_terminal();
+            if !ended {
+                return false;
+            }
+            // A result that raced a cancel is discarded (its names stay in the record, so the
+            // job's deletion removes what a crash here would leave).
+            discard = r.cancel && !results.is_empty();
+            r.results = results.clone();
+            let (status, error, triangles) = if r.cancel {
+                (JobStatus::Cancelled, Some(cancelled_error()), None)
+            } else {
+                (status, error.clone(), triangles)
             };
-            (JobStatus::Cancelled, Some(e), None)
-        } else {
-            (status, error.clone(), triangles)
-        };
-        r.view.status = status;
-        r.view.error = error;
-        r.view.triangles = triangles;
-        r.view.finished_at = Some(unix_now());
-        if status == JobStatus::Succeeded {
-            r.view.progress = 1.0;
-            r.view.stage_progress = 1.0;
-        }
-    })
+            r.view.status = status;
+            r.view.error = error;
+            r.view.triangles = triangles;
+            r.view.finished_at = Some(unix_now());
+            if status == JobStatus::Succeeded {
+                r.view.progress = 1.0;
+                r.view.stage_progress = 1.0;
+            }
+            true
+        },
+    ))?;
+    if ended {
+        remove_intermediates(ctx, job)?;
+    }
+    if ended && discard {
+        let keys: Vec<String> = results.iter().map(|f| format!("result/{f}")).collect();
+        ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
+    }
+    Ok(())
+}
+
+/// Removes job `job`'s intermediate values (names from its graph state; none without one).
+fn remove_intermediates(ctx: &Ctx, job: Uuid) -> Result<(), TaskError> {
+    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
+    if let Some((d, _)) = dag {
+        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
+        ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
+    }
+    Ok(())
+}
+
+fn cancelled_error() -> ErrorBody {
+    ErrorBody {
+        code: "cancelled".into(),
+        message: "cancelled by a DELETE request".into(),
+    }
 }
 
 fn prepare_graph(
@@ -392,9 +465,18 @@ fn prepare_graph(
         worker: ctx.worker.clone(),
         ..Default::default()
     };
-    let store = ctx.store(job);
-    let plan = prepare::prepare(cloud, params, &options, est.block_points, &store, progress)
-        .map_err(recon_error)?;
+    let written = Arc::new(Mutex::new(Vec::new()));
+    let store = ctx.recording_store(job, Some(Arc::clone(&written)));
+    let prepared = prepare::prepare(cloud, params, &options, est.block_points, &store, progress);
+    let plan = match prepared {
+        Ok(plan) => plan,
+        Err(e) => {
+            // Cancelled or failed half-way: no graph state names these values yet.
+            let keys = std::mem::take(&mut *written.lock().unwrap_or_else(|e| e.into_inner()));
+            ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
+            return Err(recon_error(e));
+        }
+    };
     let blob = plan.encode();
     ctx.block_on(objects::put(
         &ctx.res.objects,
