@@ -4,6 +4,8 @@
 //! and publishes the next phase when its update completed the current one.
 
 use super::objects::{self, JobObjects};
+pub use super::outcome::{Outcome, finish_job};
+use super::outcome::{cancelled_error, discard, ended, remove_intermediates, upload_results};
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::{DistError, connect::Resources};
@@ -83,7 +85,7 @@ impl Ctx {
         }
     }
 
-    fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
+    pub(super) fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
         self.rt.block_on(f)
     }
 
@@ -100,7 +102,7 @@ impl Ctx {
         }))
     }
 
-    fn record(&self, job: Uuid) -> Result<Option<JobRecord>, TaskError> {
+    pub(super) fn record(&self, job: Uuid) -> Result<Option<JobRecord>, TaskError> {
         let r = self.block_on(records::load::<JobRecord>(&self.res.jobs, &job_key(job)))?;
         Ok(r.map(|(v, _)| v))
     }
@@ -347,101 +349,6 @@ fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), Tas
     finish_job(ctx, job, Outcome::Succeeded { triangles, results })
 }
 
-/// Uploads every file of `dir` as `result/<file>`; returns the file names.
-fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<Vec<String>, TaskError> {
-    let entries = std::fs::read_dir(dir).map_err(|e| TaskError::Retry(e.to_string()))?;
-    let mut files = Vec::new();
-    for entry in entries.flatten() {
-        let file = entry.file_name().to_string_lossy().to_string();
-        let bytes = std::fs::read(entry.path()).map_err(|e| TaskError::Retry(e.to_string()))?;
-        let name = objects::name(job, &format!("result/{file}"));
-        ctx.block_on(objects::put(&ctx.res.objects, &name, &bytes))?;
-        files.push(file);
-    }
-    Ok(files)
-}
-
-/// How a job ends.
-pub enum Outcome {
-    /// With a mesh of this many triangles and these result files.
-    Succeeded {
-        /// Triangles of the mesh.
-        triangles: usize,
-        /// Files under `result/`.
-        results: Vec<String>,
-    },
-    /// With this error.
-    Failed(ErrorBody),
-}
-
-/// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`): the
-/// end is decided once, by compare-and-set on the record, and the call that decided it removes
-/// the job's intermediate values (the plan, the blocks' points, splines and outcomes, the pieces).
-/// Values a task still running elsewhere writes afterwards are removed with the job (expiry or
-/// DELETE), whose names come from the same graph state.
-pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskError> {
-    let (status, error, triangles, results) = match outcome {
-        Outcome::Succeeded { triangles, results } => {
-            (JobStatus::Succeeded, None, Some(triangles), results)
-        }
-        Outcome::Failed(e) => (JobStatus::Failed, Some(e), None, Vec::new()),
-    };
-    let (mut ended, mut discard) = (false, false);
-    ctx.block_on(records::update::<JobRecord, _>(
-        &ctx.res.jobs,
-        &job_key(job),
-        |r| {
-            ended = !r.view.status.is_terminal();
-            if !ended {
-                return false;
-            }
-            // A result that raced a cancel is discarded (its names stay in the record, so the
-            // job's deletion removes what a crash here would leave).
-            discard = r.cancel && !results.is_empty();
-            r.results = results.clone();
-            let (status, error, triangles) = if r.cancel {
-                (JobStatus::Cancelled, Some(cancelled_error()), None)
-            } else {
-                (status, error.clone(), triangles)
-            };
-            r.view.status = status;
-            r.view.error = error;
-            r.view.triangles = triangles;
-            r.view.finished_at = Some(unix_now());
-            if status == JobStatus::Succeeded {
-                r.view.progress = 1.0;
-                r.view.stage_progress = 1.0;
-            }
-            true
-        },
-    ))?;
-    if ended {
-        remove_intermediates(ctx, job)?;
-    }
-    if ended && discard {
-        let keys: Vec<String> = results.iter().map(|f| format!("result/{f}")).collect();
-        ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
-    }
-    Ok(())
-}
-
-/// Removes job `job`'s intermediate values (names from its graph state; none without one).
-fn remove_intermediates(ctx: &Ctx, job: Uuid) -> Result<(), TaskError> {
-    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
-    if let Some((d, _)) = dag {
-        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
-        ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
-    }
-    Ok(())
-}
-
-fn cancelled_error() -> ErrorBody {
-    ErrorBody {
-        code: "cancelled".into(),
-        message: "cancelled by a DELETE request".into(),
-    }
-}
-
 fn prepare_graph(
     ctx: &Ctx,
     job: Uuid,
@@ -490,6 +397,11 @@ fn prepare_graph(
         regions_started_ms: 0,
     };
     ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
+    if ended(ctx, job)? {
+        // Ended (cancelled) while preparing: the end's removal may have run before the graph
+        // state named these values.
+        return remove_intermediates(ctx, job);
+    }
     ctx.update_job(job, |r| set_stage(r, Stage::Blocks, 0.0))?;
     let tasks: Vec<Task> = (0..plan.blocks.len())
         .map(|b| Task {
@@ -553,6 +465,9 @@ fn block(
     let outcome = graph::fit_step(&plan, &store, b, &ctx.worker, progress).map_err(recon_error)?;
     let name = objects::name(job, &format!("block/{b}"));
     ctx.block_on(objects::put(&ctx.res.objects, &name, &outcome.encode()))?;
+    if ended(ctx, job)? {
+        return discard(ctx, job, &[format!("spline/{b}"), format!("block/{b}")]);
+    }
     let (done, total) = mark_done(ctx, job, b, false)?;
     if done < total {
         return ctx.update_job(job, |r| {
@@ -585,6 +500,9 @@ fn region(
         &name,
         &encode_region(&outcome),
     ))?;
+    if ended(ctx, job)? {
+        return discard(ctx, job, &[format!("piece/{r}"), format!("region/{r}")]);
+    }
     let (done, total) = mark_done(ctx, job, r, true)?;
     if done < total {
         return ctx.update_job(job, |v| {
