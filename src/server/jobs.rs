@@ -348,10 +348,9 @@ impl JobManager {
         for id in &old {
             // On a NATS node the job's record decides, with compare-and-set: one node deletes it.
             let deleted = match &self.backend {
-                Some(b) => b.expire(*id, cutoff).map(|mine| {
+                Some(b) => b.expire(*id, cutoff).inspect(|_| {
                     write(&self.jobs).remove(id);
                     let _ = self.store.remove(*id);
-                    mine
                 }),
                 None => self.delete(*id).map(|()| true),
             };
