@@ -105,6 +105,10 @@ pub struct Resources {
     pub jobs: kv::Store,
     /// Inputs, intermediate values and results.
     pub objects: object_store::ObjectStore,
+    /// The object store's stream (`OBJ_rbfsurf-objects`): deleting an object purges its subjects.
+    pub object_stream: stream::Stream,
+    /// The job bucket's stream (`KV_rbfsurf-jobs`): deleting a job purges its keys' subjects.
+    pub job_stream: stream::Stream,
 }
 
 /// Opens (creating when missing) the task stream, the job bucket and the object store.
@@ -152,7 +156,21 @@ pub async fn open(client: async_nats::Client) -> Result<Resources, DistError> {
             .await
             .map_err(DistError::nats("object store"))?,
     };
-    Ok(Resources { js, jobs, objects })
+    let object_stream = js
+        .get_stream(format!("OBJ_{OBJECT_BUCKET}"))
+        .await
+        .map_err(DistError::nats("object store"))?;
+    let job_stream = js
+        .get_stream(format!("KV_{JOB_BUCKET}"))
+        .await
+        .map_err(DistError::nats("job bucket"))?;
+    Ok(Resources {
+        js,
+        jobs,
+        objects,
+        object_stream,
+        job_stream,
+    })
 }
 
 /// The workers' shared durable pull consumer (explicit acks, `ack_wait`, bounded deliveries).

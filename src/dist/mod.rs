@@ -22,6 +22,7 @@
 
 pub mod connect;
 mod objects;
+mod outcome;
 mod queue;
 mod records;
 pub mod remote;

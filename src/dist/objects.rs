@@ -6,6 +6,7 @@
 //! except a read of a name that does not exist.
 
 use super::DistError;
+use super::connect::{OBJECT_BUCKET, Resources};
 use crate::pipeline::tiled::store::{RemoteStore, StoreError};
 use async_nats::jetstream::object_store::{self, ObjectStore};
 use std::time::Duration;
@@ -85,14 +86,64 @@ pub async fn get(os: &ObjectStore, name: &str) -> Result<Vec<u8>, DistError> {
     .await
 }
 
-/// Deletes the objects `keys` of job `job` (missing ones are fine). Names are always known
-/// (from the record and the graph state): listing a bucket that other jobs are writing is
-/// avoided.
-pub async fn delete(os: &ObjectStore, job: Uuid, keys: &[String]) {
+/// The bytes of `name`, `None` when there is no such object (or it was deleted).
+pub async fn get_opt(os: &ObjectStore, name: &str) -> Result<Option<Vec<u8>>, DistError> {
+    match os.info(name).await {
+        Err(e) if e.kind() == object_store::InfoErrorKind::NotFound => return Ok(None),
+        Ok(info) if info.deleted => return Ok(None),
+        _ => {}
+    }
+    get(os, name).await.map(Some)
+}
+
+/// Removes the objects `keys` of job `job` entirely: the chunks, then the metadata, each by a
+/// purge of its subject, so (unlike the client's `delete`) no deletion marker stays behind and
+/// the store does not grow with deleted jobs. Missing objects are fine; a removal interrupted
+/// half-way is completed by running it again. Names are always known (from the record and the
+/// graph state): listing a bucket that other jobs are writing is avoided.
+pub async fn remove(res: &Resources, job: Uuid, keys: &[String]) -> Result<(), DistError> {
     for k in keys {
         let n = name(job, k);
-        let _ = tokio::time::timeout(ATTEMPT_TIMEOUT, os.delete(&n)).await;
+        retry(&format!("remove {n}"), || async {
+            let info = match res.objects.info(&n).await {
+                Ok(info) => info,
+                Err(e) if e.kind() == object_store::InfoErrorKind::NotFound => return Ok(()),
+                Err(e) => return Err((true, e.to_string())),
+            };
+            let chunks = format!("$O.{OBJECT_BUCKET}.C.{}", info.nuid);
+            let meta = format!("$O.{OBJECT_BUCKET}.M.{}", base64_url(n.as_bytes()));
+            for subject in [chunks, meta] {
+                (res.object_stream.purge().filter(subject).await)
+                    .map_err(|e| (true, e.to_string()))?;
+            }
+            Ok(())
+        })
+        .await?;
     }
+    Ok(())
+}
+
+/// Base64 with the URL-safe alphabet and padding (RFC 4648 §5): how the object store names an
+/// object's metadata subject.
+fn base64_url(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(char::from(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
 }
 
 /// The keys of the task graph's intermediate values of a graph with `blocks` blocks and
@@ -116,10 +167,18 @@ pub struct JobObjects {
     pub job: Uuid,
     /// The runtime the calls block on.
     pub rt: tokio::runtime::Handle,
+    /// Records every key put, when set (the prepare step: its values are removed when it fails,
+    /// before any graph state names them).
+    pub written: Option<std::sync::Arc<std::sync::Mutex<Vec<String>>>>,
 }
 
 impl RemoteStore for JobObjects {
     fn put(&self, key: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        if let Some(w) = &self.written {
+            w.lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(key.to_string());
+        }
         let n = name(self.job, key);
         (self.rt.block_on(put(&self.os, &n, &bytes))).map_err(|e| store_error(&n, e))
     }
@@ -134,5 +193,28 @@ fn store_error(name: &str, e: DistError) -> StoreError {
     StoreError::Io {
         path: name.into(),
         source: std::io::Error::other(e.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::base64_url;
+
+    #[test]
+    fn base64_url_matches_rfc_4648_vectors() {
+        let cases = [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ];
+        for (plain, encoded) in cases {
+            assert_eq!(base64_url(plain.as_bytes()), encoded, "{plain}");
+        }
+        // The URL-safe alphabet: 0xfb 0xff -> "-_8=" (standard base64 would give "+/8=").
+        assert_eq!(base64_url(&[0xfb, 0xff]), "-_8=");
     }
 }

@@ -28,7 +28,15 @@ pub struct JobRecord {
     /// Files of the results (`result/<file>` in the object store), set when the job succeeds.
     #[serde(default)]
     pub results: Vec<String>,
+    /// Unix milliseconds when an API node claimed the finished job for deletion (expiry or a
+    /// DELETE); 0: not claimed. A claim older than [`DELETE_CLAIM_STALE_MS`] (its node died
+    /// mid-deletion) may be taken over. API nodes show a claimed job as gone.
+    #[serde(default)]
+    pub deleting_since_ms: u64,
 }
+
+/// After this long (ms) a deletion claim is considered abandoned and another node may take it.
+pub const DELETE_CLAIM_STALE_MS: u64 = 5 * 60 * 1000;
 
 /// The task graph's progress in `dag.<id>`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -116,4 +124,17 @@ where
         what: format!("update {key}"),
         message: last,
     })
+}
+
+/// Removes `key` from the bucket entirely (a purge of its subject: no deletion marker stays, so
+/// the bucket does not grow with deleted jobs). Watchers are not told: callers first store a
+/// value that tells them (a deletion claim). Missing keys are fine.
+pub async fn purge(res: &super::connect::Resources, key: &str) -> Result<(), DistError> {
+    let subject = format!("$KV.{}.{key}", super::connect::JOB_BUCKET);
+    super::objects::retry(&format!("purge {key}"), || async {
+        (res.job_stream.purge().filter(subject.clone()).await)
+            .map(|_| ())
+            .map_err(|e| (true, e.to_string()))
+    })
+    .await
 }

@@ -8,7 +8,7 @@ use super::DistError;
 use super::connect::{self, NatsConfig, Resources};
 use super::objects;
 use super::queue::{self, Task, TaskKind};
-use super::records::{self, DagState, JobRecord, dag_key, job_key};
+use super::records::{self, DELETE_CLAIM_STALE_MS, DagState, JobRecord, dag_key, job_key};
 use crate::params::ReconOptions;
 use crate::server::config::ServerConfig;
 use crate::server::error::ErrorBody;
@@ -52,6 +52,7 @@ impl JobBackend for NatsJobs {
             max_bytes: cfg.max_upload_bytes,
             cancel: false,
             results: Vec::new(),
+            deleting_since_ms: 0,
         };
         let job = view.id;
         self.rt
@@ -98,30 +99,60 @@ impl JobBackend for NatsJobs {
     }
 
     fn delete(&self, id: Uuid) -> std::io::Result<()> {
-        self.rt
-            .block_on(async {
-                let (os, kv) = (&self.res.objects, &self.res.jobs);
-                if let Some((d, _)) = records::load::<DagState>(kv, &dag_key(id)).await? {
-                    objects::delete(
-                        os,
-                        id,
-                        &objects::intermediates(d.blocks.len(), d.regions.len()),
-                    )
-                    .await;
-                }
-                if let Some((r, _)) = records::load::<JobRecord>(kv, &job_key(id)).await? {
-                    let mut keys: Vec<String> =
-                        (r.results.iter()).map(|f| format!("result/{f}")).collect();
-                    keys.push(r.view.input.file.clone());
-                    objects::delete(os, id, &keys).await;
-                }
-                for key in [job_key(id), dag_key(id)] {
-                    let _ = kv.delete(&key).await;
-                }
-                Ok::<(), DistError>(())
-            })
-            .map_err(std::io::Error::other)
+        let purge = self.rt.block_on(purge(&self.res, id, None));
+        purge.map(|_| ()).map_err(std::io::Error::other)
     }
+
+    fn expire(&self, id: Uuid, cutoff: u64) -> std::io::Result<bool> {
+        let purge = self.rt.block_on(purge(&self.res, id, Some(cutoff)));
+        purge.map_err(std::io::Error::other)
+    }
+}
+
+fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// Deletes finished job `id` (when it finished at or before `cutoff`, Unix seconds, if given):
+/// first claims it with a compare-and-set of its record (`deleting_since_ms`), so of several API
+/// nodes sweeping at once exactly one goes on (an abandoned claim is taken over after
+/// [`DELETE_CLAIM_STALE_MS`]); then removes its objects (input, plan, the graph's values,
+/// results), then its graph state and record. Every API node shows a claimed job as gone.
+/// Returns whether this call deleted the job.
+async fn purge(res: &Resources, id: Uuid, cutoff: Option<u64>) -> Result<bool, DistError> {
+    let now = now_ms();
+    let mut claimed = false;
+    let rec = records::update::<JobRecord, _>(&res.jobs, &job_key(id), |r| {
+        let due = cutoff.is_none_or(|c| r.view.finished_at.is_some_and(|t| t <= c));
+        let free = r.deleting_since_ms == 0
+            || now.saturating_sub(r.deleting_since_ms) >= DELETE_CLAIM_STALE_MS;
+        claimed = r.view.status.is_terminal() && due && free;
+        if claimed {
+            r.deleting_since_ms = now;
+        }
+        claimed
+    })
+    .await?;
+    let Some(rec) = rec.filter(|_| claimed) else {
+        return Ok(false);
+    };
+    if let Some((d, _)) = records::load::<DagState>(&res.jobs, &dag_key(id)).await? {
+        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
+        objects::remove(res, id, &keys).await?;
+    }
+    let mut keys: Vec<String> = (rec.results.iter())
+        .map(|f| format!("result/{f}"))
+        .collect();
+    keys.push(rec.view.input.file.clone());
+    objects::remove(res, id, &keys).await?;
+    // The graph state first: while the record exists, a new claim can still find its names.
+    for key in [dag_key(id), job_key(id)] {
+        records::purge(res, &key).await?;
+    }
+    tracing::info!(%id, "job deleted with its objects");
+    Ok(true)
 }
 
 /// Follows every job record for ever (re-watching after a lost connection) into `mgr`.
@@ -129,6 +160,9 @@ pub async fn mirror(backend: Arc<NatsJobs>, mgr: Arc<JobManager>) {
     loop {
         match backend.res.jobs.watch_with_history("job.>").await {
             Ok(mut watch) => {
+                if let Err(e) = resync(&backend, &mgr).await {
+                    tracing::warn!(error = %e, "cannot list the job records; stale entries stay until the next watch");
+                }
                 while let Some(entry) = watch.next().await {
                     match entry {
                         Ok(e) => apply(&backend, &mgr, &e.key, e.operation, &e.value).await,
@@ -145,6 +179,58 @@ pub async fn mirror(backend: Arc<NatsJobs>, mgr: Arc<JobManager>) {
     }
 }
 
+/// Forgets finished jobs whose records are gone and cached results of jobs that no longer
+/// exist: records are purged without a marker (see [`purge`]), so a node that was not watching
+/// when a job went (restarted, or disconnected) learns it here, on every (re)watch.
+async fn resync(backend: &NatsJobs, mgr: &Arc<JobManager>) -> Result<(), DistError> {
+    let mut keys = (backend.res.jobs.keys().await).map_err(DistError::nats("list jobs"))?;
+    let mut live = std::collections::HashSet::new();
+    while let Some(key) = keys.next().await {
+        let key = key.map_err(DistError::nats("list jobs"))?;
+        if let Some(id) = key
+            .strip_prefix("job.")
+            .and_then(|s| Uuid::parse_str(s).ok())
+        {
+            live.insert(id);
+        }
+    }
+    let mgr = Arc::clone(mgr);
+    let prune = move || -> std::io::Result<usize> {
+        let gone: Vec<Uuid> = (mgr.list().into_iter())
+            .filter(|v| v.status.is_terminal() && !live.contains(&v.id))
+            .map(|v| v.id)
+            .collect();
+        let mut n = gone.len();
+        for id in gone {
+            mgr.forget(id);
+        }
+        // Only finished jobs have cached files, and a finished job's record exists until it
+        // is deleted: a directory of an id not listed is stale. (A directory with a
+        // `status.json` is an embedded service's job, not a cache: never touched.)
+        for entry in std::fs::read_dir(mgr.config().data_dir.as_path())?.flatten() {
+            let name = entry.file_name();
+            let id = name.to_str().and_then(|s| Uuid::parse_str(s).ok());
+            let cache = !entry.path().join("status.json").exists();
+            if let Some(id) = id.filter(|id| cache && !live.contains(id)) {
+                mgr.forget(id);
+                n += 1;
+            }
+        }
+        Ok(n)
+    };
+    let pruned = tokio::task::spawn_blocking(prune)
+        .await
+        .map_err(DistError::nats("resync"))?
+        .map_err(DistError::nats("resync"))?;
+    if pruned > 0 {
+        tracing::info!(
+            pruned,
+            "forgot jobs deleted while this node was not watching"
+        );
+    }
+    Ok(())
+}
+
 async fn apply(backend: &NatsJobs, mgr: &Arc<JobManager>, key: &str, op: Operation, value: &[u8]) {
     let Some(id) = key
         .strip_prefix("job.")
@@ -152,13 +238,17 @@ async fn apply(backend: &NatsJobs, mgr: &Arc<JobManager>, key: &str, op: Operati
     else {
         return;
     };
-    if op != Operation::Put {
+    let rec = (op == Operation::Put)
+        .then(|| serde_json::from_slice::<JobRecord>(value))
+        .transpose();
+    let Ok(rec) = rec else {
+        tracing::warn!(%id, "a job record that does not parse; ignored");
+        return;
+    };
+    // Deleted, or claimed for deletion by some API node: gone for every node.
+    let Some(rec) = rec.filter(|r| r.deleting_since_ms == 0) else {
         let mgr = Arc::clone(mgr);
         let _ = tokio::task::spawn_blocking(move || mgr.forget(id)).await;
-        return;
-    }
-    let Ok(rec) = serde_json::from_slice::<JobRecord>(value) else {
-        tracing::warn!(%id, "a job record that does not parse; ignored");
         return;
     };
     let view = rec.view;
@@ -204,13 +294,14 @@ async fn fetch_results(
     Ok(())
 }
 
-/// Runs a NATS-backed API node until Ctrl-C / SIGTERM.
-pub async fn serve_nats(cfg: ServerConfig, nats: NatsConfig) -> std::io::Result<()> {
-    let listener = tokio::net::TcpListener::bind(cfg.addr).await?;
+/// A NATS-backed API node's state (its job manager over the backend, upload slots) and the
+/// task that mirrors the job records into it (abort it when the node stops).
+pub async fn start_node(
+    cfg: ServerConfig,
+    nats: &NatsConfig,
+) -> std::io::Result<(crate::server::AppState, tokio::task::JoinHandle<()>)> {
     tracing::info!(nats = %connect::redact_url(&nats.url), "connecting to NATS");
-    let backend = connect_backend(&nats)
-        .await
-        .map_err(std::io::Error::other)?;
+    let backend = connect_backend(nats).await.map_err(std::io::Error::other)?;
     let permits = (2 * cfg.workers).max(2);
     let mgr = {
         let b: Arc<dyn JobBackend> = backend.clone();
@@ -223,6 +314,13 @@ pub async fn serve_nats(cfg: ServerConfig, nats: NatsConfig) -> std::io::Result<
         jobs: mgr,
         uploads: Arc::new(tokio::sync::Semaphore::new(permits)),
     };
+    Ok((state, watcher))
+}
+
+/// Runs a NATS-backed API node until Ctrl-C / SIGTERM.
+pub async fn serve_nats(cfg: ServerConfig, nats: NatsConfig) -> std::io::Result<()> {
+    let listener = tokio::net::TcpListener::bind(cfg.addr).await?;
+    let (state, watcher) = start_node(cfg, &nats).await?;
     tracing::info!(addr = %listener.local_addr()?, "rbfsurf serve listening (jobs on NATS)");
     let result = crate::server::serve_on(listener, state, crate::server::shutdown_signal()).await;
     watcher.abort();

@@ -4,6 +4,8 @@
 //! and publishes the next phase when its update completed the current one.
 
 use super::objects::{self, JobObjects};
+pub use super::outcome::{Outcome, finish_job};
+use super::outcome::{cancelled_error, discard, ended, remove_intermediates, upload_results};
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::{DistError, connect::Resources};
@@ -83,19 +85,24 @@ impl Ctx {
         }
     }
 
-    fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
+    pub(super) fn block_on<F: std::future::Future>(&self, f: F) -> F::Output {
         self.rt.block_on(f)
     }
 
     fn store(&self, job: Uuid) -> Store {
+        self.recording_store(job, None)
+    }
+
+    fn recording_store(&self, job: Uuid, written: Option<Arc<Mutex<Vec<String>>>>) -> Store {
         Store::Remote(Box::new(JobObjects {
             os: self.res.objects.clone(),
             job,
             rt: self.rt.clone(),
+            written,
         }))
     }
 
-    fn record(&self, job: Uuid) -> Result<Option<JobRecord>, TaskError> {
+    pub(super) fn record(&self, job: Uuid) -> Result<Option<JobRecord>, TaskError> {
         let r = self.block_on(records::load::<JobRecord>(&self.res.jobs, &job_key(job)))?;
         Ok(r.map(|(v, _)| v))
     }
@@ -176,7 +183,12 @@ pub fn run_task(ctx: &Ctx, task: Task, progress: &TaskProgress) -> Result<bool, 
     let Some(rec) = ctx.record(task.job)? else {
         return Ok(false);
     };
-    if rec.view.status.is_terminal() || rec.cancel {
+    if rec.view.status.is_terminal() {
+        return Ok(false);
+    }
+    if rec.cancel {
+        // Cancelled between tasks: the first task to see it ends the job (the others skip).
+        finish_job(ctx, task.job, Outcome::Failed(cancelled_error()))?;
         return Ok(false);
     }
     let params = ReconParams::try_from(&rec.options).map_err(|e| {
@@ -214,12 +226,7 @@ fn start(
     ]
     .contains(&rec.view.input.format.as_str())
     {
-        return Err(TaskError::Job(ErrorBody {
-            code: ErrorKind::BadParameter.code().into(),
-            message:
-                "composition and morph jobs run on the embedded service (serve without --nats)"
-                    .into(),
-        }));
+        return volume(ctx, rec, progress);
     }
     let data = ctx.block_on(objects::get(
         &ctx.res.objects,
@@ -312,67 +319,40 @@ fn whole(
     finish_job(ctx, rec.view.id, done)
 }
 
-/// Uploads every file of `dir` as `result/<file>`; returns the file names.
-fn upload_results(ctx: &Ctx, job: Uuid, dir: &std::path::Path) -> Result<Vec<String>, TaskError> {
-    let entries = std::fs::read_dir(dir).map_err(|e| TaskError::Retry(e.to_string()))?;
-    let mut files = Vec::new();
-    for entry in entries.flatten() {
-        let file = entry.file_name().to_string_lossy().to_string();
-        let bytes = std::fs::read(entry.path()).map_err(|e| TaskError::Retry(e.to_string()))?;
-        let name = objects::name(job, &format!("result/{file}"));
-        ctx.block_on(objects::put(&ctx.res.objects, &name, &bytes))?;
-        files.push(file);
-    }
-    Ok(files)
-}
-
-/// How a job ends.
-pub enum Outcome {
-    /// With a mesh of this many triangles and these result files.
-    Succeeded {
-        /// Triangles of the mesh.
-        triangles: usize,
-        /// Files under `result/`.
-        results: Vec<String>,
-    },
-    /// With this error.
-    Failed(ErrorBody),
-}
-
-/// Ends job `job` (unless it already ended; a success of a cancelled job ends `cancelled`) and
-/// drops its intermediate values.
-pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskError> {
-    let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
-    if let Some((d, _)) = dag {
-        let keys = objects::intermediates(d.blocks.len(), d.regions.len());
-        ctx.block_on(objects::delete(&ctx.res.objects, job, &keys));
-    }
-    let (status, error, triangles, results) = match outcome {
-        Outcome::Succeeded { triangles, results } => {
-            (JobStatus::Succeeded, None, Some(triangles), results)
+/// A composition or morph job, whole on this worker (it is not block-parallel): the operands'
+/// saved fields come from their jobs' results in the object store, the mesh and report go to
+/// this job's results, as for a reconstruction.
+fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), TaskError> {
+    use crate::server::volume::{VolumeRequest, run_volume};
+    let job = rec.view.id;
+    let bytes = ctx.block_on(objects::get(
+        &ctx.res.objects,
+        &objects::name(job, &rec.view.input.file),
+    ))?;
+    let req = VolumeRequest::decode(&bytes).map_err(TaskError::Job)?;
+    let ids = req.validate().map_err(|message| {
+        TaskError::Job(ErrorBody {
+            code: ErrorKind::BadParameter.code().into(),
+            message,
+        })
+    })?;
+    let mut fields = std::collections::HashMap::new();
+    for op in ids {
+        let name = objects::name(op, "result/fitted.field");
+        if let Some(bytes) = ctx.block_on(objects::get_opt(&ctx.res.objects, &name))? {
+            fields.insert(op, (bytes, name));
         }
-        Outcome::Failed(e) => (JobStatus::Failed, Some(e), None, Vec::new()),
+    }
+    let dir = tempfile::tempdir().map_err(|e| TaskError::Retry(e.to_string()))?;
+    let (mesh, report) = (dir.path().join("mesh.glb"), dir.path().join("report.json"));
+    let mut load = |op: Uuid| {
+        let (bytes, name) = fields.get(&op)?;
+        crate::frep::format::decode(bytes, name).ok()
     };
-    ctx.update_job(job, |r| {
-        r.results = results.clone();
-        let (status, error, triangles) = if r.cancel {
-            let e = ErrorBody {
-                code: "cancelled".into(),
-                message: "cancelled by a DELETE request".into(),
-            };
-            (JobStatus::Cancelled, Some(e), None)
-        } else {
-            (status, error.clone(), triangles)
-        };
-        r.view.status = status;
-        r.view.error = error;
-        r.view.triangles = triangles;
-        r.view.finished_at = Some(unix_now());
-        if status == JobStatus::Succeeded {
-            r.view.progress = 1.0;
-            r.view.stage_progress = 1.0;
-        }
-    })
+    let triangles =
+        run_volume(&req, &mut load, &mesh, &report, progress).map_err(TaskError::Job)?;
+    let results = upload_results(ctx, job, dir.path())?;
+    finish_job(ctx, job, Outcome::Succeeded { triangles, results })
 }
 
 fn prepare_graph(
@@ -398,9 +378,18 @@ fn prepare_graph(
         worker: ctx.worker.clone(),
         ..Default::default()
     };
-    let store = ctx.store(job);
-    let plan = prepare::prepare(input, params, &options, est.block_points, &store, progress)
-        .map_err(recon_error)?;
+    let written = Arc::new(Mutex::new(Vec::new()));
+    let store = ctx.recording_store(job, Some(Arc::clone(&written)));
+    let prepared = prepare::prepare(input, params, &options, est.block_points, &store, progress);
+    let plan = match prepared {
+        Ok(plan) => plan,
+        Err(e) => {
+            // Cancelled or failed half-way: no graph state names these values yet.
+            let keys = std::mem::take(&mut *written.lock().unwrap_or_else(|e| e.into_inner()));
+            ctx.block_on(objects::remove(&ctx.res, job, &keys))?;
+            return Err(recon_error(e));
+        }
+    };
     let blob = plan.encode();
     ctx.block_on(objects::put(
         &ctx.res.objects,
@@ -414,6 +403,11 @@ fn prepare_graph(
         regions_started_ms: 0,
     };
     ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
+    if ended(ctx, job)? {
+        // Ended (cancelled) while preparing: the end's removal may have run before the graph
+        // state named these values.
+        return remove_intermediates(ctx, job);
+    }
     ctx.update_job(job, |r| set_stage(r, Stage::Blocks, 0.0))?;
     let tasks: Vec<Task> = (0..plan.blocks.len())
         .map(|b| Task {
@@ -477,6 +471,9 @@ fn block(
     let outcome = graph::fit_step(&plan, &store, b, &ctx.worker, progress).map_err(recon_error)?;
     let name = objects::name(job, &format!("block/{b}"));
     ctx.block_on(objects::put(&ctx.res.objects, &name, &outcome.encode()))?;
+    if ended(ctx, job)? {
+        return discard(ctx, job, &[format!("spline/{b}"), format!("block/{b}")]);
+    }
     let (done, total) = mark_done(ctx, job, b, false)?;
     if done < total {
         return ctx.update_job(job, |r| {
@@ -509,6 +506,9 @@ fn region(
         &name,
         &encode_region(&outcome),
     ))?;
+    if ended(ctx, job)? {
+        return discard(ctx, job, &[format!("piece/{r}"), format!("region/{r}")]);
+    }
     let (done, total) = mark_done(ctx, job, r, true)?;
     if done < total {
         return ctx.update_job(job, |v| {

@@ -19,6 +19,9 @@ use std::time::Duration;
 
 /// Period of in-progress acknowledgements and progress updates of a running task.
 pub const HEARTBEAT: Duration = Duration::from_secs(2);
+/// Period at which a running task's job record is read for a cancellation (one direct get of
+/// one key); the task's stages check the flag at their own granularity (milliseconds).
+pub const CANCEL_POLL: Duration = Duration::from_millis(500);
 
 /// How the worker runs.
 #[derive(Debug, Clone)]
@@ -102,10 +105,13 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
     };
     let mut tick = tokio::time::interval(HEARTBEAT);
     tick.tick().await;
+    let mut poll = tokio::time::interval(CANCEL_POLL);
+    poll.tick().await;
     let result = loop {
         tokio::select! {
             r = &mut run => break r,
             _ = tick.tick() => heartbeat(&ctx, &msg, task, &progress).await,
+            _ = poll.tick() => poll_cancel(&ctx, task, &progress).await,
         }
     };
     let secs = started.elapsed().as_secs_f64();
@@ -145,6 +151,24 @@ async fn fail(ctx: &Arc<Ctx>, task: Task, body: crate::server::error::ErrorBody)
         steps::finish_job(&ctx, task.job, steps::Outcome::Failed(body))
     })
     .await;
+}
+
+/// Sets the task's cancel flag when its job was cancelled, ended or deleted.
+async fn poll_cancel(ctx: &Ctx, task: Task, progress: &TaskProgress) {
+    if progress.cancel.load(Ordering::Relaxed) {
+        return;
+    }
+    let entry = tokio::time::timeout(CANCEL_POLL, ctx.res.jobs.get(job_key(task.job))).await;
+    let stop = match entry {
+        Ok(Ok(Some(bytes))) => serde_json::from_slice::<JobRecord>(&bytes)
+            .is_ok_and(|r| r.cancel || r.view.status.is_terminal()),
+        Ok(Ok(None)) => true,
+        // No answer in time or NATS unreachable: the next poll tries again.
+        _ => false,
+    };
+    if stop {
+        progress.cancel.store(true, Ordering::Relaxed);
+    }
 }
 
 /// Keeps the task's message alive, publishes a whole job's progress, picks up a cancellation.

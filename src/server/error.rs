@@ -14,8 +14,9 @@ pub struct ErrorBody {
     /// `unauthorized`, `not_found`, `not_ready`, `method_not_allowed`, `too_large`,
     /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`,
     /// `conflicting_parameters`, `unsuitable_parameter`,
-    /// `queue_full`, `busy`, `shutting_down`, `job_timeout`, `interrupted`, `cancelled`,
-    /// `reconstruction_failed`, `insufficient_storage`, `internal`.
+    /// `queue_full`, `busy`, `shutting_down`, `job_store_unavailable`, `job_timeout`,
+    /// `interrupted`, `cancelled`, `reconstruction_failed`, `insufficient_storage`, `no_lod`,
+    /// `no_field`, `internal`.
     pub code: String,
     /// Human-readable explanation with a hint.
     pub message: String,

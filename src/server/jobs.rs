@@ -331,15 +331,12 @@ impl JobManager {
         self.store.remove(id)
     }
 
-    /// Deletes finished jobs older than `expire_after`; returns how many went.
+    /// Deletes finished jobs older than `expire_after`; returns how many this call deleted (on a
+    /// NATS node: those it won the deletion of; the others were another node's).
     pub fn expire(&self) -> usize {
         let Some(age) = self.cfg.expire_after else {
             return 0;
         };
-        if self.backend.is_some() {
-            // Jobs in NATS live as long as the bucket keeps them (see docs/distributed.md).
-            return 0;
-        }
         let cutoff = unix_now().saturating_sub(age.as_secs());
         let old: Vec<Uuid> = read(&self.jobs)
             .values()
@@ -347,15 +344,25 @@ impl JobManager {
             .filter(|v| v.status.is_terminal() && v.finished_at.is_some_and(|t| t <= cutoff))
             .map(|v| v.id)
             .collect();
+        let mut expired = 0;
         for id in &old {
-            if let Err(e) = self.delete(*id) {
-                tracing::warn!(%id, error = %e, "cannot delete expired job");
+            // On a NATS node the job's record decides, with compare-and-set: one node deletes it.
+            let deleted = match &self.backend {
+                Some(b) => b.expire(*id, cutoff).inspect(|_| {
+                    write(&self.jobs).remove(id);
+                    let _ = self.store.remove(*id);
+                }),
+                None => self.delete(*id).map(|()| true),
+            };
+            match deleted {
+                Ok(mine) => expired += usize::from(mine),
+                Err(e) => tracing::warn!(%id, error = %e, "cannot delete expired job"),
             }
         }
-        if !old.is_empty() {
-            tracing::info!(expired = old.len(), "expired finished jobs");
+        if expired > 0 {
+            tracing::info!(expired, "expired finished jobs");
         }
-        old.len()
+        expired
     }
 
     /// Stops accepting jobs, stops running ones (stored as `queued` again, so they run after a

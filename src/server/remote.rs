@@ -25,8 +25,12 @@ pub trait JobBackend: Send + Sync {
     ) -> Result<(), String>;
     /// Asks for job `id` to stop (does not block).
     fn cancel(&self, id: Uuid);
-    /// Deletes job `id`'s record and files (blocking).
+    /// Deletes finished job `id`'s record and files (blocking).
     fn delete(&self, id: Uuid) -> std::io::Result<()>;
+    /// Deletes finished job `id` when it finished at or before `cutoff` (Unix seconds), unless
+    /// another node is deleting it (blocking). Returns whether this call deleted it: with several
+    /// API nodes sweeping the same jobs, exactly one deletes each.
+    fn expire(&self, id: Uuid, cutoff: u64) -> std::io::Result<bool>;
 }
 
 impl JobManager {

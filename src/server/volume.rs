@@ -153,31 +153,53 @@ pub fn run_volume_job(
     id: Uuid,
     progress: &dyn Progress,
 ) -> Result<usize, ErrorBody> {
-    let internal = |m: String| ErrorBody {
-        code: "internal".into(),
-        message: m,
-    };
     let bytes = std::fs::read(store.file(id, REQUEST_FILE))
         .map_err(|e| internal(format!("stored request unreadable: {e}")))?;
-    let req: VolumeRequest = serde_json::from_slice(&bytes)
-        .map_err(|e| internal(format!("stored request invalid: {e}")))?;
+    let req = VolumeRequest::decode(&bytes)?;
+    let mut load = |op: Uuid| format::read(&store.file(op, "fitted.field")).ok();
+    let mesh = store.file(id, "mesh.glb");
+    let report = store.file(id, "report.json");
+    run_volume(&req, &mut load, &mesh, &report, progress)
+}
+
+fn internal(message: String) -> ErrorBody {
+    ErrorBody {
+        code: "internal".into(),
+        message,
+    }
+}
+
+impl VolumeRequest {
+    /// The stored request (`request.json`).
+    pub fn decode(bytes: &[u8]) -> Result<VolumeRequest, ErrorBody> {
+        serde_json::from_slice(bytes).map_err(|e| internal(format!("stored request invalid: {e}")))
+    }
+}
+
+/// Mesh `req` into `mesh_path` (GLB; animated for a morph) and `report_path` (JSON); `load`
+/// gives the saved field of an operand job (`None`: gone, or no field). Returns the triangle
+/// count (all frames of a morph). Used by the embedded service and by NATS workers.
+pub fn run_volume(
+    req: &VolumeRequest,
+    load: &mut dyn FnMut(Uuid) -> Option<crate::frep::FieldModel>,
+    mesh_path: &std::path::Path,
+    report_path: &std::path::Path,
+    progress: &dyn Progress,
+) -> Result<usize, ErrorBody> {
     let ids = req.validate().map_err(|m| ErrorBody {
         code: "bad_parameter".into(),
         message: m,
     })?;
     let mut loader = Loader::preloaded_only();
     for op in ids {
-        let path = store.file(op, "fitted.field");
-        let model = format::read(&path).map_err(|_| ErrorBody {
+        let model = load(op).ok_or_else(|| ErrorBody {
             code: "bad_parameter".into(),
             message: format!("operand {op}: the job is gone or has no field"),
         })?;
         loader.insert(&op.hyphenated().to_string(), std::sync::Arc::new(model));
     }
     let solid = |e: &str, l: &mut Loader| parse(e).and_then(|x| build(&x, l)).map_err(failed);
-    let mesh_path = store.file(id, "mesh.glb");
-    let report_path = store.file(id, "report.json");
-    let (triangles, report) = match &req {
+    let (triangles, report) = match req {
         VolumeRequest::Composition(c) => {
             let s = solid(&c.expression, &mut loader)?;
             let params = CsgParams {
@@ -186,7 +208,7 @@ pub fn run_volume_job(
             };
             let (mesh, report) =
                 crate::frep::mesh_solid(&s, &c.expression, &params, progress).map_err(failed)?;
-            write_mesh(&mesh_path, &mesh, MeshFormat::Glb(Default::default()))
+            write_mesh(mesh_path, &mesh, MeshFormat::Glb(Default::default()))
                 .map_err(|e| internal(e.to_string()))?;
             (mesh.triangles.len(), serde_json::to_vec_pretty(&report))
         }
@@ -215,14 +237,14 @@ pub fn run_volume_job(
             })
             .map_err(failed)?;
             let glb = encode_animated_glb(&frames, 0.25).map_err(|e| internal(e.to_string()))?;
-            write_atomic(&mesh_path, &glb).map_err(|e| internal(e.to_string()))?;
+            write_atomic(mesh_path, &glb).map_err(|e| internal(e.to_string()))?;
             let n = frames.iter().map(|f| f.triangles.len()).sum();
             (n, serde_json::to_vec_pretty(&report))
         }
     };
     let report = report.map_err(|e| internal(e.to_string()))?;
-    if let Err(e) = write_atomic(&report_path, &report) {
-        let _ = std::fs::remove_file(&mesh_path);
+    if let Err(e) = write_atomic(report_path, &report) {
+        let _ = std::fs::remove_file(mesh_path);
         return Err(internal(e.to_string()));
     }
     Ok(triangles)

@@ -171,16 +171,44 @@ pub fn serve(nats: &Nats, dir: &Path, name: &str) -> (Proc, String) {
     (p, format!("http://127.0.0.1:{port}"))
 }
 
+/// An embedded service (`serve` without `--nats`) on a free port; returns it and its base URL.
+pub fn serve_embedded(dir: &Path, name: &str) -> (Proc, String) {
+    let port = free_port();
+    let mut cmd = Command::new(BIN);
+    cmd.args(["serve", "--addr", &format!("127.0.0.1:{port}")])
+        .arg("--data-dir")
+        .arg(dir.join(format!("{name}-data")))
+        .env("RUST_LOG", "info");
+    let p = spawn(&mut cmd, dir.join(format!("{name}.log")));
+    wait_port(port, "serve");
+    (p, format!("http://127.0.0.1:{port}"))
+}
+
 /// `GET base+path`: status and body.
 pub fn get(base: &str, path: &str) -> (u16, Vec<u8>) {
+    request("GET", base, path, None)
+}
+
+/// `POST base+path` with a JSON body: status and body as JSON.
+pub fn post_json(base: &str, path: &str, body: &serde_json::Value) -> (u16, serde_json::Value) {
+    let bytes = serde_json::to_vec(body).unwrap();
+    let (status, body) = request("POST", base, path, Some(&bytes));
+    (status, serde_json::from_slice(&body).unwrap_or_default())
+}
+
+/// `METHOD base+path` (with a JSON body if given): status and body.
+pub fn request(method: &str, base: &str, path: &str, body: Option<&[u8]>) -> (u16, Vec<u8>) {
     let addr = base.trim_start_matches("http://");
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let body = body.unwrap_or_default();
     write!(
         s,
-        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
+        body.len()
     )
     .unwrap();
+    s.write_all(body).unwrap();
     let mut raw = Vec::new();
     s.read_to_end(&mut raw).unwrap();
     let end = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();

@@ -6,6 +6,7 @@
 //! Skipped with a message when `nats-server` is missing, except under CI=true (then it fails).
 
 mod harness;
+mod lifecycle;
 
 use harness::*;
 use std::path::Path;

@@ -997,6 +997,70 @@ fn openapi_document_matches_proto() {
     }
 }
 
+/// Every error code the server's sources can emit (`ApiError::new(STATUS, "code", …)`,
+/// `code: "…"` literals in src/server and src/dist, and the library's `ErrorKind` codes) is named
+/// in the document's `ErrorBody.code` description.
+#[test]
+fn openapi_error_codes_name_every_code_the_server_emits() {
+    fn sources(dir: &std::path::Path, out: &mut Vec<String>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                sources(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(std::fs::read_to_string(&p).unwrap());
+            }
+        }
+    }
+    /// The first string literal after each occurrence of `marker` (within `reach` bytes).
+    fn literals_after(text: &str, marker: &str, reach: usize, out: &mut Vec<String>) {
+        for (at, _) in text.match_indices(marker) {
+            let tail = &text[at + marker.len()..];
+            let tail = &tail[..tail.len().min(reach)];
+            let mut parts = tail.split('"');
+            if let (Some(_), Some(lit)) = (parts.next(), parts.next()) {
+                out.push(lit.to_string());
+            }
+        }
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut texts = Vec::new();
+    sources(&root.join("server"), &mut texts);
+    sources(&root.join("dist"), &mut texts);
+    let mut codes = Vec::new();
+    for t in &texts {
+        literals_after(t, "ApiError::new(", 120, &mut codes);
+        for (at, _) in t.match_indices("code: \"") {
+            let lit = t[at + 7..].split('"').next().unwrap();
+            codes.push(lit.to_string());
+        }
+    }
+    let kinds = std::fs::read_to_string(root.join("error.rs")).unwrap();
+    for (at, _) in kinds.match_indices(" => \"") {
+        let lit = kinds[at + 5..].split('"').next().unwrap();
+        codes.push(lit.to_string());
+    }
+    codes.sort();
+    codes.dedup();
+    assert!(
+        codes.len() >= 20 && codes.iter().any(|c| c == "job_store_unavailable"),
+        "the scan found too little: {codes:?}"
+    );
+    let doc: serde_json::Value =
+        serde_json::from_str(&rbfsurf::server::openapi::openapi_json()).unwrap();
+    let described = doc["components"]["schemas"]["ErrorBody"]["properties"]["code"]["description"]
+        .as_str()
+        .unwrap();
+    let missing: Vec<&String> = (codes.iter())
+        .filter(|c| c.chars().all(|ch| ch.is_ascii_lowercase() || ch == '_'))
+        .filter(|c| !described.contains(&format!("`{c}`")))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "error codes the server emits but the OpenAPI document does not name: {missing:?}"
+    );
+}
+
 /// The published constraints are the enforced ones: every enumerated value is accepted and any
 /// other refused; each numeric bound is accepted and the value just outside it refused.
 #[test]

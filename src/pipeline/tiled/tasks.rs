@@ -275,6 +275,7 @@ pub(crate) fn fit_block(
     let outer = plan.blocks[b].outer;
     let index = sorted_index(&set.points, params)?;
     let carrier = build_carrier(plan, set, &index)?;
+    super::super::check_cancel(progress)?;
     let members: Vec<usize> = (0..set.points.len())
         .filter(|&i| outer.contains(&set.points[i]))
         .collect();
@@ -285,6 +286,7 @@ pub(crate) fn fit_block(
         pts.par_iter().map(|p| -carrier.value(p)).collect()
     };
     drop(carrier);
+    super::super::check_cancel(progress)?;
     let mut timings = Timings::default();
     if pts.is_empty() {
         return Ok(FittedBlock {
@@ -371,6 +373,7 @@ pub(crate) fn polygonize_region(
     let params = &plan.params;
     let index = sorted_index(&set.points, params)?;
     let carrier = build_carrier(plan, set, &index)?;
+    super::super::check_cancel(progress)?;
     let blocks = (splines.into_iter())
         .map(|(b, spline)| PouBlock {
             core: plan.blocks[b].core,
@@ -395,6 +398,7 @@ pub(crate) fn polygonize_region(
         range: plan.grid.regions[r],
     };
     let (mesh, stats) = polygonize_in(&field, &plan.grid.domain, &pp, &region, progress)?;
+    super::super::check_cancel(progress)?;
     let owned: Vec<f64> = {
         use rayon::prelude::*;
         (set.points.par_iter())

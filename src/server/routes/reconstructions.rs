@@ -60,7 +60,7 @@ pub struct MultipartUpload {
         (status = 422, description = "parses but cannot be reconstructed, does not fit the server's limits (`system_too_large` with the estimate), parameters that conflict (`conflicting_parameters`) or do not suit the cloud (`unsuitable_parameter`); with `wait`: the job failed so (`{error, job}`)", body = ErrorResponse),
         (status = 429, description = "queue full, or too many uploads at once (see Retry-After)", body = ErrorResponse),
         (status = 500, description = "internal error (generic message with an error id; with `wait`: `{error, job}`)", body = ErrorResponse),
-        (status = 503, description = "shutting down", body = ErrorResponse),
+        (status = 503, description = "shutting down (`shutting_down`), or on a NATS-backed node (`serve --nats`) the job store did not take the job (`job_store_unavailable`); both with Retry-After", body = ErrorResponse),
         (status = 507, description = "the server's storage is full", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_job(

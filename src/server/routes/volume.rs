@@ -97,7 +97,7 @@ fn body<T: serde::de::DeserializeOwned>(bytes: &Bytes) -> Result<T, ApiError> {
     responses((status = 202, description = "queued", body = crate::server::routes::JobResponse),
         (status = 400, body = ErrorResponse), (status = 404, description = "an operand job does not exist", body = ErrorResponse),
         (status = 409, description = "an operand job has not finished", body = ErrorResponse),
-        (status = 429, body = ErrorResponse), (status = 503, body = ErrorResponse)),
+        (status = 429, body = ErrorResponse), (status = 503, description = "`shutting_down`, or `job_store_unavailable` (NATS-backed node)", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_composition(
     State(st): State<AppState>,
@@ -114,7 +114,7 @@ pub async fn create_composition(
     request_body = MorphRequest,
     responses((status = 202, description = "queued", body = crate::server::routes::JobResponse),
         (status = 400, body = ErrorResponse), (status = 404, body = ErrorResponse),
-        (status = 409, body = ErrorResponse), (status = 429, body = ErrorResponse), (status = 503, body = ErrorResponse)),
+        (status = 409, body = ErrorResponse), (status = 429, body = ErrorResponse), (status = 503, description = "`shutting_down`, or `job_store_unavailable` (NATS-backed node)", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_morph(
     State(st): State<AppState>,
