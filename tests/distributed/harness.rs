@@ -257,6 +257,22 @@ pub fn rbfsurf(args: &[&str]) -> String {
 }
 
 /// `rbfsurf submit` in a child process (not waited for).
+/// The tests' 30,000-point torus (`rbfsurf generate torus --seed 3`) as `dir/torus.ply`.
+pub fn torus_cloud(dir: &Path) -> PathBuf {
+    let path = dir.join("torus.ply");
+    rbfsurf(&[
+        "generate",
+        "torus",
+        "--points",
+        "30000",
+        "--seed",
+        "3",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    path
+}
+
 pub fn submit(base: &str, cloud: &Path, out: &Path, report: &Path, extra: &[&str]) -> Child {
     Command::new(BIN)
         .arg("submit")

@@ -158,17 +158,7 @@ fn finished_jobs_expire_once_across_two_api_nodes_and_leave_nothing_behind() {
     // A whole job, a task-graph job (30,000-point torus out of core) and a composition.
     let cloud = sphere(dir);
     let whole = submit_id(&a, &cloud, dir, "whole", &["--resolution", "32"]);
-    let torus = dir.join("torus.ply");
-    rbfsurf(&[
-        "generate",
-        "torus",
-        "--points",
-        "30000",
-        "--seed",
-        "3",
-        "-o",
-        torus.to_str().unwrap(),
-    ]);
+    let torus = torus_cloud(dir);
     let graph = submit_id(
         &b,
         &torus,
@@ -269,17 +259,7 @@ fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
     let (_api, a) = serve(&nats, dir, "api");
     let rt = tokio::runtime::Runtime::new().unwrap();
     let js = rt.block_on(jetstream(&nats));
-    let torus = dir.join("torus.ply");
-    rbfsurf(&[
-        "generate",
-        "torus",
-        "--points",
-        "30000",
-        "--seed",
-        "3",
-        "-o",
-        torus.to_str().unwrap(),
-    ]);
+    let torus = torus_cloud(dir);
     let logs = || w1.log() + &w2.log();
     let launch = |extra: &[&str]| {
         Command::new(BIN)

@@ -28,18 +28,8 @@ fn assert_same_mesh(a: &Path, b: &Path) {
 
 /// The torus, its local out-of-core run (mesh, report) under `dir`.
 fn torus_and_local_run(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
-    let cloud = dir.join("torus.ply");
+    let cloud = torus_cloud(dir);
     let local = dir.join("local.glb");
-    rbfsurf(&[
-        "generate",
-        "torus",
-        "--points",
-        "30000",
-        "--seed",
-        "3",
-        "-o",
-        cloud.to_str().unwrap(),
-    ]);
     rbfsurf(&[
         "reconstruct",
         cloud.to_str().unwrap(),
