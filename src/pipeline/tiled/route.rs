@@ -99,7 +99,8 @@ impl Lookup {
         let mut at = [0usize; 3];
         for k in 0..3 {
             let u = ((p[k] - self.min[k]) / self.cell).floor();
-            if !(u >= 0.0) {
+            // Below the box or NaN.
+            if u.is_nan() || u < 0.0 {
                 return &[];
             }
             at[k] = (u as usize).min(LOOKUP_CELLS - 1);

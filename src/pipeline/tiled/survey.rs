@@ -27,13 +27,14 @@ pub enum TiledInput<'a> {
     Cloud(&'a PointCloud),
 }
 
+/// What [`TiledInput::for_each_chunk`] calls with each chunk of points and their normals.
+pub(crate) type ChunkFn<'f> =
+    dyn FnMut(&[Point3], Option<&[Point3]>) -> Result<(), ReconError> + 'f;
+
 impl TiledInput<'_> {
     /// Calls `f` with consecutive chunks of the points (and normals when the input has them),
     /// in input order; stops at the first error (a read error becomes [`TiledError::Read`]).
-    pub(crate) fn for_each_chunk(
-        &self,
-        f: &mut dyn FnMut(&[Point3], Option<&[Point3]>) -> Result<(), ReconError>,
-    ) -> Result<(), ReconError> {
+    pub(crate) fn for_each_chunk(&self, f: &mut ChunkFn<'_>) -> Result<(), ReconError> {
         match self {
             TiledInput::Cloud(cloud) => {
                 if cloud.points.is_empty() {
