@@ -354,15 +354,20 @@ fn partition(
     params: &ReconParams,
     options: &TiledOptions,
 ) -> Result<Partition, ReconError> {
-    let dir = spill_dir(options)?;
-    let routed = route::route(
-        input,
-        cores,
-        margin,
-        normalization,
-        s.has_normals,
-        dir.path(),
-    )?;
+    // Route every point into a fresh spill folder with the given margin.
+    let spill = |margin: f64| {
+        let dir = spill_dir(options)?;
+        let routed = route::route(
+            input,
+            cores,
+            margin,
+            normalization,
+            s.has_normals,
+            dir.path(),
+        )?;
+        Ok::<_, ReconError>((dir, routed))
+    };
+    let (dir, routed) = spill(margin)?;
     let alive: Vec<usize> = (0..cores.len())
         .filter(|&b| routed.core_points[b] > 0)
         .collect();
@@ -386,16 +391,7 @@ fn partition(
         });
     }
     drop(dir);
-    let dir = spill_dir(options)?;
-    let margin = MARGIN_FACTOR * needed;
-    route::route(
-        input,
-        cores,
-        margin,
-        normalization,
-        s.has_normals,
-        dir.path(),
-    )?;
+    let (dir, _) = spill(MARGIN_FACTOR * needed)?;
     Ok(Partition {
         dir,
         alive,
