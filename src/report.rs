@@ -259,11 +259,12 @@ pub struct PolygonizeReport {
     /// Field evaluations.
     pub field_evaluations: u64,
     /// Share of the surface area farther than the support radius from the data, measured on a
-    /// coarse pass to decide open or closed (`--boundary auto` with the local carrier; else null).
+    /// coarse pass to decide open or closed (`--boundary auto` with the local carrier, when the
+    /// data do not surround their middle; else null).
     pub unsupported_share: Option<f64>,
     /// Widest cone of directions (half-angle, degrees) from the middle of the data that holds no
-    /// point, measured when `unsupported_share` is above 2%: below 25° the data surround the
-    /// object and the surface is closed all the same (else null).
+    /// point (`--boundary auto` with the local carrier; else null): below 25° the data surround
+    /// the object and the surface is closed without the coarse pass.
     pub empty_cone_deg: Option<f64>,
     /// Triangles the polygonizer produced (open surfaces: only in the band the data support).
     pub triangles_polygonized: usize,

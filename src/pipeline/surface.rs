@@ -5,18 +5,19 @@
 //! The rule for open or closed (`--boundary auto`, local carrier): data all around an object (a
 //! closed object with holes from occlusion, e.g. under its base) give a closed surface, the holes
 //! closed by the carrier; a single-view range scan or an open scene give an open surface on the
-//! data. It is decided on a coarse polygonization (a quarter of the resolution, ~1/16 of the
-//! triangles) without its floaters: when more than [`AUTO_TRIM_FRACTION`] of its area is farther
-//! than the support radius from every point, the carrier continues the data's own sheet far beyond
-//! them (an open scan) and the surface is trimmed — unless the data surround their middle (every
-//! cone of directions wider than [`SURROUNDED_BELOW_DEG`] from the centroid or the box centre holds a
-//! point, [`surround_cone`]): then the unsupported part is holes in data taken all around (oceans on
-//! a globe, a sparse scan's gaps), which the carrier closes; a closed object's unsupported patches are a tiny
-//! part (bunny 10k: 0.03%), and the carrier's blobs away from the data are floaters, not counted.
-//! A coarse surface that is not closed inside the domain (a sheet of the carrier attached to the
-//! object runs out to the box, as on thin limbs) counts as open too: trimming removes that sheet,
-//! closing would keep it; so does a final surface that is not closed inside the domain (a sheet too
-//! thin for the coarse pass): it is trimmed like an open scan.
+//! data. Data that surround their middle (every cone of directions wider than
+//! [`SURROUNDED_BELOW_DEG`] from the centroid or the box centre holds a point, [`surround_cone`])
+//! are closed: whatever surface lies away from them is holes in data taken all around (oceans on a
+//! globe, a sparse scan's gaps), which the carrier closes. Otherwise it is decided on a coarse
+//! polygonization (a quarter of the resolution, ~1/16 of the triangles) without its floaters: when
+//! more than [`AUTO_TRIM_FRACTION`] of its area is farther than the support radius from every
+//! point, the carrier continues the data's own sheet far beyond them (an open scan) and the
+//! surface is trimmed; a closed object's unsupported patches are a tiny part (bunny 10k: 0.03%),
+//! and the carrier's blobs away from the data are floaters, not counted. A coarse surface that is
+//! not closed inside the domain (a sheet of the carrier runs out to the box) counts as open too:
+//! trimming removes that sheet, closing would keep it; so does a final surface that is not closed
+//! inside the domain (a sheet too thin for the coarse pass, or one beside data that surround
+//! their middle): it is trimmed like an open scan.
 //!
 //! Open surfaces are polygonized only in the band the data support ([`DataBand`]: cells whose centre
 //! is within the support radius plus half a cell diagonal of a point), then the triangles whose
@@ -74,10 +75,13 @@ pub(crate) fn extract_surface(
         Boundary::Closed => false,
         Boundary::Trim => true,
         Boundary::Auto if fit.carrier != Some(CarrierKind::Local) => false,
+        // Data all around are closed without the coarse pass (a surface that still leaves the
+        // domain is trimmed below).
+        Boundary::Auto if surrounded(fit, &mut s) => false,
         Boundary::Auto => {
             let share = unsupported_share(fit, params, domain, resolution, progress)?;
             s.unsupported_share = Some(share);
-            share > AUTO_TRIM_FRACTION && !surrounded(fit, &mut s)
+            share > AUTO_TRIM_FRACTION
         }
     };
     let pp = PolygonizeParams {
@@ -123,12 +127,12 @@ pub(crate) fn extract_surface(
     Ok((mesh, open, s))
 }
 
-/// Whether the data surround the object (an open-looking coarse surface is then closed); records
-/// the widest empty cone in the report. A coarse surface that leaves the domain is trimmed anyway.
+/// Whether the data surround the object (the surface is then closed, and the coarse pass not
+/// run); records the widest empty cone in the report.
 fn surrounded(fit: &FittedField, s: &mut PolygonizeReport) -> bool {
     let cone = surround_cone(&fit.points).to_degrees();
     s.empty_cone_deg = Some(cone);
-    cone < SURROUNDED_BELOW_DEG && s.unsupported_share.is_some_and(|share| share < 1.0)
+    cone < SURROUNDED_BELOW_DEG
 }
 
 /// Centroids sampled for the measured chord error (every k-th triangle beyond this many).
