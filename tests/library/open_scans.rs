@@ -145,8 +145,10 @@ fn a_sphere_with_wide_holes_all_round_is_closed_not_trimmed() {
     )
     .unwrap();
     let (m, p) = (&rec.report.mesh, &rec.report.polygonize);
-    assert!(p.unsupported_share.is_some_and(|s| s > 0.02), "{p:?}");
+    // Surrounded: closed without the coarse pass (which found more than 2 % of its area
+    // unsupported, enough to trim data that do not surround their middle).
     assert!(p.empty_cone_deg.is_some_and(|d| d < 25.0), "{p:?}");
+    assert!(p.unsupported_share.is_none(), "{p:?}");
     assert_eq!(rec.report.params.boundary, "closed");
     assert!(m.watertight && m.manifold, "{m:?}");
     assert_eq!((m.components, m.genus), (1, Some(0)), "{m:?}");
