@@ -141,14 +141,24 @@ fn sample_corners(
         demands: Vec::new(),
     };
     let mut queue = Vec::new();
+    let mut asked = (Vec::new(), Vec::new());
     for t in 0..count {
         let region = tile_box(t3_of(t));
         if !keep.touches(&region) {
             s.tiles[t] = TileState::Outside;
-        } else if forced.contains(&t) || field.may_contain_zero(&region) {
-            s.tiles[t] = TileState::Sampled;
+        } else if forced.contains(&t) {
             queue.push(t);
+        } else {
+            asked.0.push(t);
+            asked.1.push(region);
         }
+    }
+    let mut answers = vec![false; asked.0.len()];
+    field.may_contain_zero_each(&asked.1, &mut answers);
+    queue.extend(asked.0.iter().zip(&answers).filter(|a| *a.1).map(|a| *a.0));
+    queue.sort_unstable();
+    for &t in &queue {
+        s.tiles[t] = TileState::Sampled;
     }
     let mut scratch = (Vec::new(), Vec::new(), Vec::new());
     while !queue.is_empty() {

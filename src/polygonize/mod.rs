@@ -36,6 +36,14 @@ pub trait ScalarField: Sync {
     /// after all (see [`polygonize_in`]), so a wrong `false` can only lose pieces of the zero set
     /// that lie entirely in skipped tiles.
     fn may_contain_zero(&self, cell: &Aabb) -> bool;
+    /// [`ScalarField::may_contain_zero`] of every cell: `out[i]` for `cells[i]`
+    /// (`out.len() == cells.len()`). Fields whose test samples the cells' corners override it
+    /// to sample a corner that neighbouring cells share once.
+    fn may_contain_zero_each(&self, cells: &[Aabb], out: &mut [bool]) {
+        for (c, o) in cells.iter().zip(out.iter_mut()) {
+            *o = self.may_contain_zero(c);
+        }
+    }
 }
 
 /// Where the polygonizer may put triangles: a grid cell is triangulated only when its box

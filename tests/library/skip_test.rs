@@ -106,3 +106,59 @@ fn skipping_changes_nothing_on_fields_fitted_to_real_scans() {
         );
     }
 }
+
+/// Every tile of a 4-cell grid over `fit`'s box (neighbours share their corners, as in the
+/// polygonizer): the batched test's answers.
+fn tile_answers(fit: &FittedField, cells: usize) -> (Vec<Aabb>, Vec<bool>) {
+    let b = Aabb::from_points(&fit.points).inflated(2.0 * fit.support_radius);
+    let e = b.extent();
+    let h = e.iter().fold(0.0f64, |a, &x| a.max(x)) / cells as f64;
+    let n = e.map(|x| (x / h).ceil() as usize);
+    let corner = |i: usize, k: usize| b.min[k] + i as f64 * h;
+    let mut tiles = Vec::new();
+    for k in (0..n[2]).step_by(4) {
+        for j in (0..n[1]).step_by(4) {
+            for i in (0..n[0]).step_by(4) {
+                tiles.push(Aabb {
+                    min: [corner(i, 0), corner(j, 1), corner(k, 2)],
+                    max: [corner(i + 4, 0), corner(j + 4, 1), corner(k + 4, 2)],
+                });
+            }
+        }
+    }
+    let mut each = vec![false; tiles.len()];
+    fit.field.may_contain_zero_each(&tiles, &mut each);
+    (tiles, each)
+}
+
+#[test]
+fn the_batched_skip_test_answers_as_the_per_tile_one() {
+    let kitten =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
+    for (name, params) in [
+        ("local carrier", ReconParams::default()),
+        (
+            "3 levels",
+            ReconParams {
+                levels: 3,
+                ..Default::default()
+            },
+        ),
+    ] {
+        let fit = fit(&kitten, &params);
+        let (tiles, each) = tile_answers(&fit, 96);
+        let single: Vec<bool> = tiles
+            .iter()
+            .map(|t| fit.field.may_contain_zero(t))
+            .collect();
+        assert_eq!(each, single, "{name}");
+        let (yes, no) = (
+            each.iter().filter(|&&a| a).count(),
+            each.iter().filter(|&&a| !a).count(),
+        );
+        assert!(
+            yes > 0 && no > 0,
+            "{name}: {yes} tiles may hold the surface, {no} not"
+        );
+    }
+}
