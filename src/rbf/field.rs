@@ -394,7 +394,7 @@ impl RbfField {
             return far.abs() <= (l + s.poly_gradient_norm()) * half;
         }
         let mut samples = vec![sample(&c)];
-        samples.extend(cell.corners().iter().map(|p| sample(p)));
+        samples.extend(cell.corners().iter().map(sample));
         let pos = samples.iter().filter(|v| **v > 0.0).count();
         pos != 0 && pos != samples.len() || samples.iter().any(|v| v.abs() <= half)
     }
