@@ -35,11 +35,18 @@ fn submit_id(base: &str, cloud: &Path, dir: &Path, name: &str, extra: &[&str]) -
     line.split(' ').nth(1).unwrap().to_string()
 }
 
-/// Waits (at most `secs`) for job `id` to end on node `base`; returns its view.
+/// Waits (at most `secs`) for job `id` to end on node `base`; returns its view. A job posted to
+/// another API node is unknown here (404) until this node's watch of the job records delivers it.
 fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
     let t = Instant::now();
     loop {
-        let v = get_json(base, &format!("/v1/reconstructions/{id}?wait=5"));
+        let (status, body) = get(base, &format!("/v1/reconstructions/{id}?wait=5"));
+        if status == 404 && t.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(50));
+            continue;
+        }
+        assert_eq!(status, 200, "{id}: {}", String::from_utf8_lossy(&body));
+        let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
         let status = v["status"].as_str().unwrap_or_default().to_string();
         if ["succeeded", "failed", "cancelled"].contains(&status.as_str()) {
             return v;
