@@ -100,7 +100,10 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
     let workers = workers_of(&rep);
     assert!(!workers.is_empty());
     for w in &workers {
-        assert!(ran.contains(w.as_str()), "worker {w} printed its id: {ran:?}");
+        assert!(
+            ran.contains(w.as_str()),
+            "worker {w} printed its id: {ran:?}"
+        );
     }
 
     // In memory: one whole-job task.
