@@ -111,9 +111,40 @@ pub struct Resources {
     pub job_stream: stream::Stream,
 }
 
-/// Opens (creating when missing) the task stream, the job bucket and the object store.
+/// Attempts at opening the resources: nodes that start together race to create them.
+const OPEN_ATTEMPTS: u32 = 8;
+
+/// Runs `step` until it succeeds, at most [`OPEN_ATTEMPTS`] times, 100 ms more apart each time.
+/// Every step is get-or-create: when several nodes start at once, each finds nothing and creates,
+/// and all but one are refused ("subjects overlap with an existing stream", "already in use");
+/// the next attempt finds what the first created.
+async fn retried<T, F, Fut>(what: &str, mut step: F) -> Result<T, DistError>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<T, DistError>>,
+{
+    let mut attempt = 1;
+    loop {
+        match step().await {
+            Ok(v) => return Ok(v),
+            Err(e) if attempt < OPEN_ATTEMPTS => {
+                tracing::debug!(error = %e, attempt, "opening the {what} again");
+                tokio::time::sleep(Duration::from_millis(100 * u64::from(attempt))).await;
+                attempt += 1;
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Opens (creating when missing) the task stream, the job bucket and the object store; retried
+/// while other nodes create them at the same time.
 pub async fn open(client: async_nats::Client) -> Result<Resources, DistError> {
     let js = jetstream::new(client);
+    retried("JetStream resources", || open_once(js.clone())).await
+}
+
+async fn open_once(js: jetstream::Context) -> Result<Resources, DistError> {
     js.get_or_create_stream(stream::Config {
         name: TASK_STREAM.to_string(),
         subjects: vec![TASK_SUBJECTS.to_string()],
@@ -183,17 +214,20 @@ pub async fn worker_consumer(
         .get_stream(TASK_STREAM)
         .await
         .map_err(DistError::nats("task stream"))?;
-    stream
-        .get_or_create_consumer(
-            WORKER_CONSUMER,
-            consumer::pull::Config {
-                durable_name: Some(WORKER_CONSUMER.to_string()),
-                ack_policy: consumer::AckPolicy::Explicit,
-                ack_wait: cfg.ack_wait,
-                max_deliver: MAX_DELIVER,
-                ..Default::default()
-            },
-        )
-        .await
-        .map_err(DistError::nats("worker consumer"))
+    retried("worker consumer", || async {
+        stream
+            .get_or_create_consumer(
+                WORKER_CONSUMER,
+                consumer::pull::Config {
+                    durable_name: Some(WORKER_CONSUMER.to_string()),
+                    ack_policy: consumer::AckPolicy::Explicit,
+                    ack_wait: cfg.ack_wait,
+                    max_deliver: MAX_DELIVER,
+                    ..Default::default()
+                },
+            )
+            .await
+            .map_err(DistError::nats("worker consumer"))
+    })
+    .await
 }
