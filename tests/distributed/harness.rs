@@ -39,15 +39,41 @@ pub fn free_port() -> u16 {
         .port()
 }
 
-fn wait_port(port: u16, what: &str) {
+/// Waits until `proc`'s log holds `ready` (so the process itself listens, not another one on a
+/// port reused between [`free_port`] and its bind); false when it ended first (the caller
+/// retries on another port).
+fn wait_ready(proc: &mut Proc, ready: &str, what: &str) -> bool {
     let t = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+    loop {
+        if proc.log().contains(ready) {
+            return true;
+        }
+        if let Ok(Some(_)) = proc.child.try_wait() {
+            return false;
+        }
         assert!(
             t.elapsed() < Duration::from_secs(30),
-            "{what} did not start"
+            "{what} not ready in 30 s:\n{}",
+            proc.log()
         );
-        std::thread::sleep(Duration::from_millis(50));
+        std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Starts `make(port)` on free ports until one comes up (its log holds `ready`).
+fn start_on_free_port(what: &str, ready: &str, mut make: impl FnMut(u16) -> Proc) -> (Proc, u16) {
+    for _ in 0..5 {
+        let port = free_port();
+        let mut p = make(port);
+        if wait_ready(&mut p, ready, what) {
+            return (p, port);
+        }
+        eprintln!(
+            "{what} on port {port} ended; trying another port:\n{}",
+            p.log()
+        );
+    }
+    panic!("{what} did not start on five ports");
 }
 
 /// A child process killed when dropped.
@@ -127,8 +153,19 @@ impl Nats {
             "-sd",
         ])
         .arg(&self.store);
-        self.proc = Some(spawn(&mut cmd, log));
-        wait_port(self.port, "nats-server");
+        let mut p = spawn(&mut cmd, log);
+        if !wait_ready(&mut p, "Server is ready", "nats-server") {
+            assert!(
+                self.starts == 1,
+                "nats-server did not restart on port {}:\n{}",
+                self.port,
+                p.log()
+            );
+            // The first start lost its port to another process: another one.
+            self.port = free_port();
+            return self.up();
+        }
+        self.proc = Some(p);
     }
 
     /// Stops it (SIGKILL: file storage must survive a crash).
@@ -153,34 +190,34 @@ pub fn worker(nats: &Nats, dir: &Path, name: &str, concurrency: usize) -> Proc {
 
 /// An API node on a free port with its own data directory; returns it and its base URL.
 pub fn serve(nats: &Nats, dir: &Path, name: &str) -> (Proc, String) {
-    let port = free_port();
     let data = dir.join(format!("{name}-data"));
-    let mut cmd = Command::new(BIN);
-    cmd.args([
-        "serve",
-        "--nats",
-        &nats.url(),
-        "--addr",
-        &format!("127.0.0.1:{port}"),
-    ])
-    .arg("--data-dir")
-    .arg(&data)
-    .env("RUST_LOG", "info");
-    let p = spawn(&mut cmd, dir.join(format!("{name}.log")));
-    wait_port(port, "serve --nats");
+    let (p, port) = start_on_free_port("serve --nats", "rbfsurf serve listening", |port| {
+        let mut cmd = Command::new(BIN);
+        cmd.args([
+            "serve",
+            "--nats",
+            &nats.url(),
+            "--addr",
+            &format!("127.0.0.1:{port}"),
+        ])
+        .arg("--data-dir")
+        .arg(&data)
+        .env("RUST_LOG", "info");
+        spawn(&mut cmd, dir.join(format!("{name}.log")))
+    });
     (p, format!("http://127.0.0.1:{port}"))
 }
 
 /// An embedded service (`serve` without `--nats`) on a free port; returns it and its base URL.
 pub fn serve_embedded(dir: &Path, name: &str) -> (Proc, String) {
-    let port = free_port();
-    let mut cmd = Command::new(BIN);
-    cmd.args(["serve", "--addr", &format!("127.0.0.1:{port}")])
-        .arg("--data-dir")
-        .arg(dir.join(format!("{name}-data")))
-        .env("RUST_LOG", "info");
-    let p = spawn(&mut cmd, dir.join(format!("{name}.log")));
-    wait_port(port, "serve");
+    let (p, port) = start_on_free_port("serve", "rbfsurf serve listening", |port| {
+        let mut cmd = Command::new(BIN);
+        cmd.args(["serve", "--addr", &format!("127.0.0.1:{port}")])
+            .arg("--data-dir")
+            .arg(dir.join(format!("{name}-data")))
+            .env("RUST_LOG", "info");
+        spawn(&mut cmd, dir.join(format!("{name}.log")))
+    });
     (p, format!("http://127.0.0.1:{port}"))
 }
 

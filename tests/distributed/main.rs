@@ -224,3 +224,35 @@ fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
     assert_eq!(rep["mesh"]["watertight"], true);
     assert!(workers_of(&rep).len() >= 2, "{:?}", workers_of(&rep));
 }
+
+/// Nodes that start together on a fresh server race to create the task stream, the job bucket,
+/// the object store and the workers' consumer: every one must start (the losers of a race find
+/// what the winner created).
+#[test]
+fn api_nodes_and_workers_starting_together_all_start() {
+    let Some(bin) = nats_binary() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let nats = Nats::start(bin, dir);
+    let nats = &nats;
+    let nodes = std::thread::scope(|s| {
+        let apis: Vec<_> = (0..4)
+            .map(|i| s.spawn(move || serve(nats, dir, &format!("api-{i}"))))
+            .collect();
+        let workers: Vec<_> = (0..3)
+            .map(|i| s.spawn(move || worker(nats, dir, &format!("w{i}"), 1)))
+            .collect();
+        let apis: Vec<_> = apis.into_iter().map(|h| h.join().unwrap()).collect();
+        let workers: Vec<_> = workers.into_iter().map(|h| h.join().unwrap()).collect();
+        (apis, workers)
+    });
+    for (_, base) in &nodes.0 {
+        let (status, _) = get(base, "/v1/reconstructions");
+        assert_eq!(status, 200, "{base}");
+    }
+    for w in &nodes.1 {
+        wait_until(30, "the worker to wait for tasks", || {
+            w.log().contains("waiting for tasks")
+        });
+    }
+}
