@@ -111,30 +111,22 @@ pub struct Resources {
     pub job_stream: stream::Stream,
 }
 
-/// Attempts at opening the resources: nodes that start together race to create them.
+/// Attempts at opening the resources (one second apart). Every step is get-or-create: when
+/// several nodes start at once, each finds nothing and creates, and all but one are refused
+/// ("subjects overlap with an existing stream", "already in use"); the next attempt finds what
+/// the first created.
 const OPEN_ATTEMPTS: u32 = 8;
 
-/// Runs `step` until it succeeds, at most [`OPEN_ATTEMPTS`] times, 100 ms more apart each time.
-/// Every step is get-or-create: when several nodes start at once, each finds nothing and creates,
-/// and all but one are refused ("subjects overlap with an existing stream", "already in use");
-/// the next attempt finds what the first created.
-async fn retried<T, F, Fut>(what: &str, mut step: F) -> Result<T, DistError>
+/// `step` with [`OPEN_ATTEMPTS`] attempts ([`super::objects::retry_n`]).
+async fn retried<T, Fut>(what: &str, mut step: impl FnMut() -> Fut) -> Result<T, DistError>
 where
-    F: FnMut() -> Fut,
     Fut: std::future::Future<Output = Result<T, DistError>>,
 {
-    let mut attempt = 1;
-    loop {
-        match step().await {
-            Ok(v) => return Ok(v),
-            Err(e) if attempt < OPEN_ATTEMPTS => {
-                tracing::debug!(error = %e, attempt, "opening the {what} again");
-                tokio::time::sleep(Duration::from_millis(100 * u64::from(attempt))).await;
-                attempt += 1;
-            }
-            Err(e) => return Err(e),
-        }
-    }
+    super::objects::retry_n(what, OPEN_ATTEMPTS, || {
+        let f = step();
+        async move { f.await.map_err(|e| (true, e.to_string())) }
+    })
+    .await
 }
 
 /// Opens (creating when missing) the task stream, the job bucket and the object store; retried

@@ -23,15 +23,25 @@ pub fn name(job: Uuid, key: &str) -> String {
     format!("{job}/{key}")
 }
 
-/// Retries `op` while it fails with a transient error (`Err(Some(e))`); `Err(None)` after the
-/// last attempt is the last error.
-pub async fn retry<T, F, Fut>(what: &str, mut op: F) -> Result<T, DistError>
+/// Retries `op` (one second apart, [`ATTEMPTS`] times) while it fails with a transient error
+/// (`Err((true, message))`); `Err((false, message))` fails at once. After the last attempt the
+/// error is the last message.
+pub async fn retry<T, F, Fut>(what: &str, op: F) -> Result<T, DistError>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<T, (bool, String)>>,
+{
+    retry_n(what, ATTEMPTS, op).await
+}
+
+/// [`retry`] with at most `attempts` attempts.
+pub async fn retry_n<T, F, Fut>(what: &str, attempts: u32, mut op: F) -> Result<T, DistError>
 where
     F: FnMut() -> Fut,
     Fut: std::future::Future<Output = Result<T, (bool, String)>>,
 {
     let mut last = String::new();
-    for attempt in 0..ATTEMPTS {
+    for attempt in 0..attempts {
         let outcome = tokio::time::timeout(ATTEMPT_TIMEOUT, op())
             .await
             .unwrap_or_else(|_| Err((true, "no answer in time".to_string())));
@@ -126,24 +136,8 @@ pub async fn remove(res: &Resources, job: Uuid, keys: &[String]) -> Result<(), D
 /// Base64 with the URL-safe alphabet and padding (RFC 4648 §5): how the object store names an
 /// object's metadata subject.
 fn base64_url(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(char::from(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize]));
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
+    use base64::Engine;
+    base64::engine::general_purpose::URL_SAFE.encode(bytes)
 }
 
 /// The keys of the task graph's intermediate values of a graph with `blocks` blocks and

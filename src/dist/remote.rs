@@ -13,7 +13,7 @@ use crate::params::ReconOptions;
 use crate::server::config::ServerConfig;
 use crate::server::error::ErrorBody;
 use crate::server::jobs::JobManager;
-use crate::server::model::{JobStatus, JobView, unix_now};
+use crate::server::model::{JobStatus, JobView, unix_now, unix_now_ms};
 use crate::server::remote::JobBackend;
 use async_nats::jetstream::kv::Operation;
 use futures_util::StreamExt;
@@ -109,12 +109,6 @@ impl JobBackend for NatsJobs {
     }
 }
 
-fn now_ms() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
-}
-
 /// Deletes finished job `id` (when it finished at or before `cutoff`, Unix seconds, if given):
 /// first claims it with a compare-and-set of its record (`deleting_since_ms`), so of several API
 /// nodes sweeping at once exactly one goes on (an abandoned claim is taken over after
@@ -122,7 +116,7 @@ fn now_ms() -> u64 {
 /// results), then its graph state and record. Every API node shows a claimed job as gone.
 /// Returns whether this call deleted the job.
 async fn purge(res: &Resources, id: Uuid, cutoff: Option<u64>) -> Result<bool, DistError> {
-    let now = now_ms();
+    let now = unix_now_ms();
     let mut claimed = false;
     let rec = records::update::<JobRecord, _>(&res.jobs, &job_key(id), |r| {
         let due = cutoff.is_none_or(|c| r.view.finished_at.is_some_and(|t| t <= c));

@@ -21,7 +21,7 @@ use crate::pipeline::{Execution, PointSource, RunError, RunOutput, plan_executio
 use crate::progress::{Progress, Stage};
 use crate::report::Timings;
 use crate::server::error::ErrorBody;
-use crate::server::model::{JobStatus, unix_now};
+use crate::server::model::{JobStatus, unix_now, unix_now_ms};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -427,12 +427,6 @@ fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {
     }
 }
 
-fn now_ms() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
-}
-
 /// Marks item `k` of the phase done; returns (done, total) after the update.
 fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, usize), TaskError> {
     let dag = ctx.block_on(records::update::<DagState, _>(
@@ -449,7 +443,7 @@ fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, us
             }
             flags[k] = true;
             if !regions && d.blocks.iter().all(|&x| x) {
-                d.regions_started_ms = now_ms();
+                d.regions_started_ms = unix_now_ms();
             }
             true
         },
@@ -554,7 +548,7 @@ fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskErr
         .fold(0.0, f64::max);
     let mut timings = Timings {
         clean: dag.prepare_s,
-        polygonize: now_ms().saturating_sub(dag.regions_started_ms) as f64 / 1000.0,
+        polygonize: unix_now_ms().saturating_sub(dag.regions_started_ms) as f64 / 1000.0,
         ..Default::default()
     };
     let (reports, matrix) = graph::merge_blocks(blocks, &mut timings);

@@ -19,10 +19,11 @@ use axum::http::StatusCode;
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, RwLock};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 use tokio::sync::watch;
 use uuid::Uuid;
 
+use super::model::unix_now_ms;
 pub use super::model::{InputInfo, JobStatus, JobView, unix_now};
 
 /// One job: its observable state plus the control flags the worker polls.
@@ -57,14 +58,8 @@ impl Job {
 
     fn timed_out(&self) -> bool {
         let d = self.deadline_ms.load(Ordering::Relaxed);
-        d != 0 && now_ms() >= d
+        d != 0 && unix_now_ms() >= d
     }
-}
-
-fn now_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
 }
 
 /// The [`Progress`] of a running job: publishes stage + fraction (throttled to steps of 1 %)
@@ -411,7 +406,7 @@ impl JobManager {
             return;
         }
         let started = Instant::now();
-        let deadline = now_ms() + self.cfg.job_timeout.as_millis() as u64;
+        let deadline = unix_now_ms() + self.cfg.job_timeout.as_millis() as u64;
         job.deadline_ms.store(deadline.max(1), Ordering::Relaxed);
         job.tx.send_modify(|v| {
             v.status = JobStatus::Running;

@@ -31,6 +31,15 @@ pub fn nats_binary() -> Option<PathBuf> {
     None
 }
 
+/// A private JetStream server in a fresh temporary folder (the test's folder: logs, stores,
+/// outputs); `None` when nats-server is missing outside CI (the test is then skipped).
+pub fn private_nats() -> Option<(tempfile::TempDir, Nats)> {
+    let bin = nats_binary()?;
+    let tmp = tempfile::tempdir().unwrap();
+    let nats = Nats::start(bin, tmp.path());
+    Some((tmp, nats))
+}
+
 pub fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0")
         .unwrap()

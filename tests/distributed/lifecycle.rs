@@ -67,10 +67,10 @@ fn post_job(base: &str, path: &str, body: serde_json::Value) -> String {
 
 #[test]
 fn compositions_and_morphs_run_on_workers_and_equal_the_embedded_services() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let nats = Nats::start(bin, dir);
     let _w = worker(&nats, dir, "w1", 1);
     let (_api_a, a) = serve(&nats, dir, "api-a");
     let (_api_b, b) = serve(&nats, dir, "api-b");
@@ -154,10 +154,10 @@ fn node(
 
 #[test]
 fn finished_jobs_expire_once_across_two_api_nodes_and_leave_nothing_behind() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let nats = Nats::start(bin, dir);
     let _w = worker(&nats, dir, "w1", 2);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let (node_a, a) = node(&rt, &nats, dir, "a");
@@ -257,10 +257,10 @@ fn cancel_within(base: &str, id: &str, secs: u64) -> f64 {
 
 #[test]
 fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let nats = Nats::start(bin, dir);
     let w1 = worker(&nats, dir, "w1", 1);
     let w2 = worker(&nats, dir, "w2", 1);
     let (_api, a) = serve(&nats, dir, "api");

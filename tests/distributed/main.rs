@@ -59,10 +59,10 @@ fn workers_of(rep: &serde_json::Value) -> std::collections::BTreeSet<String> {
 
 #[test]
 fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let nats = Nats::start(bin, dir);
     let _w1 = worker(&nats, dir, "w1", 1);
     let _w2 = worker(&nats, dir, "w2", 1);
     let (mut api_a, a) = serve(&nats, dir, "api-a");
@@ -168,10 +168,10 @@ fn count(log: &str, what: &str, kind: &str) -> usize {
 
 #[test]
 fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, mut nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let mut nats = Nats::start(bin, dir);
     let mut w1 = worker(&nats, dir, "w1", 1);
     let mut w2 = worker(&nats, dir, "w2", 1);
     let (_api, a) = serve(&nats, dir, "api");
@@ -230,10 +230,10 @@ fn a_killed_worker_and_a_restarted_nats_server_lose_no_job() {
 /// what the winner created).
 #[test]
 fn api_nodes_and_workers_starting_together_all_start() {
-    let Some(bin) = nats_binary() else { return };
-    let tmp = tempfile::tempdir().unwrap();
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
     let dir = tmp.path();
-    let nats = Nats::start(bin, dir);
     let nats = &nats;
     let nodes = std::thread::scope(|s| {
         let apis: Vec<_> = (0..4)
