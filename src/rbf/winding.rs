@@ -186,8 +186,9 @@ struct Node {
     /// Softening of the lumped dipole (squared length): the mean area of the node's points, so a
     /// node of one point lumps to exactly that point's softened dipole.
     soft: f64,
-    /// Children (indices into the node list) or, for a leaf, empty.
-    children: Vec<u32>,
+    /// The children: `DipoleTree::children[children]` (indices into the node list); empty for a
+    /// leaf.
+    children: std::ops::Range<u32>,
     /// Range of the node's points in the tree's order.
     range: std::ops::Range<usize>,
 }
@@ -199,6 +200,8 @@ struct DipoleTree {
     /// Softening per point (squared length): its area.
     soft: Vec<f64>,
     nodes: Vec<Node>,
+    /// Every node's children, one run per node (see [`Node::children`]).
+    children: Vec<u32>,
 }
 
 impl DipoleTree {
@@ -214,6 +217,7 @@ impl DipoleTree {
             moments: Vec::with_capacity(ids.len()),
             soft: Vec::with_capacity(ids.len()),
             nodes: Vec::new(),
+            children: Vec::new(),
         };
         let mut order = ids;
         let n = order.len();
@@ -258,7 +262,7 @@ impl DipoleTree {
             moment,
             radius,
             soft: total / slice.len() as f64,
-            children: Vec::new(),
+            children: 0..0,
             range: range.clone(),
         });
         if slice.len() <= LEAF || depth >= 32 || radius == 0.0 {
@@ -292,15 +296,21 @@ impl DipoleTree {
             }
             start += len;
         }
-        self.nodes[me as usize].children = children;
+        let start = self.children.len() as u32;
+        self.children.extend_from_slice(&children);
+        self.nodes[me as usize].children = start..self.children.len() as u32;
         me
     }
 
     /// `w(x)` by the Barnes–Hut sum.
     fn winding(&self, x: Point3) -> f64 {
         let mut sum = 0.0;
-        let mut stack = vec![0u32];
-        while let Some(id) = stack.pop() {
+        // Depth ≤ 32 and ≤ 8 children per node bound the stack (7 siblings wait per level).
+        let mut stack = [0u32; 8 * 33];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let id = stack[top];
             let node = &self.nodes[id as usize];
             let r = sub(node.centre, x);
             let d = norm(r);
@@ -315,7 +325,10 @@ impl DipoleTree {
                     sum += dipole(sub(self.points[j], x), self.moments[j], self.soft[j]);
                 }
             } else {
-                stack.extend_from_slice(&node.children);
+                for &c in &self.children[node.children.start as usize..node.children.end as usize] {
+                    stack[top] = c;
+                    top += 1;
+                }
             }
         }
         sum

@@ -170,24 +170,29 @@ impl NearPoints {
         // by insertion, then reported by (distance, id).
         let b2 = bound * bound;
         let before = |a: (f64, u32), b: (f64, u32)| a.0 < b.0 || (a.0 == b.0 && a.1 < b.1);
-        self.order.clear();
+        // A fixed array shifted in place: K is small, and a `Vec::insert` per candidate was a
+        // library memmove call each (a tenth of a statue's polygonization).
+        let mut best = [(0.0f64, 0u32); FAR_NEIGHBOURS];
+        let mut len = 0;
         for (&d2, &id) in self.d2.iter().zip(&self.wide.ids) {
             if d2 > b2 {
                 continue;
             }
             let item = (d2, id);
-            if self.order.len() == FAR_NEIGHBOURS {
-                if !before(item, self.order[FAR_NEIGHBOURS - 1]) {
-                    continue;
-                }
-                self.order.pop();
+            if len == FAR_NEIGHBOURS && !before(item, best[FAR_NEIGHBOURS - 1]) {
+                continue;
             }
-            let at = self.order.partition_point(|&o| before(o, item));
-            self.order.insert(at, item);
+            let mut at = len.min(FAR_NEIGHBOURS - 1);
+            while at > 0 && before(item, best[at - 1]) {
+                best[at] = best[at - 1];
+                at -= 1;
+            }
+            best[at] = item;
+            len = (len + 1).min(FAR_NEIGHBOURS);
         }
-        for o in &mut self.order {
-            o.0 = o.0.sqrt();
-        }
+        self.order.clear();
+        self.order
+            .extend(best[..len].iter().map(|&(d2, id)| (d2.sqrt(), id)));
         if !self.order.is_sorted_by(|a, b| before(*a, *b)) {
             self.order
                 .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
