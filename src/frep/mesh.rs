@@ -7,7 +7,7 @@ use super::FrepError;
 use super::ops::{Solid, SolidField};
 use crate::geometry::{Aabb, Normalization, TriMesh};
 use crate::mesh::topology::MeshTopology;
-use crate::polygonize::{Everywhere, PolygonizeParams, polygonize_in};
+use crate::polygonize::{Everywhere, PolygonizeParams, Seeding, polygonize_in};
 use crate::progress::Progress;
 use serde::Serialize;
 use std::time::Instant;
@@ -108,6 +108,9 @@ pub fn mesh_solid(
         resolution: params.resolution,
         max_cells: params.max_cells,
         refine_steps: params.refine_steps,
+        // Modelled solids may hold small pieces on purpose (a bead, a thin ring): sample every
+        // tile the solid's bound lets through rather than seed from sign changes only.
+        seeding: Seeding::EveryTile,
     };
     let (mut mesh, stats) = polygonize_in(&field, &unit, &pp, &Everywhere, progress)?;
     if mesh.triangles.is_empty() {

@@ -10,7 +10,7 @@
 use super::grid::Grid;
 use super::kuhn::{CubeEdge, TETS, TetCase};
 use super::refine::{EdgeRoot, place_vertices};
-use super::{Region, ScalarField};
+use super::{PolygonizeParams, Region, ScalarField, Seeding};
 use crate::geometry::{Aabb, Point3};
 
 /// How a tile of a block was treated.
@@ -123,6 +123,7 @@ fn sample_corners(
     lo: [usize; 3],
     dims: [usize; 3],
     forced: &[usize],
+    seeding: Seeding,
 ) -> Sampling {
     let tiles = tile_counts(dims);
     let count = tiles[0] * tiles[1] * tiles[2];
@@ -155,6 +156,14 @@ fn sample_corners(
     }
     let mut answers = vec![false; asked.0.len()];
     field.may_contain_zero_each(&asked.1, &mut answers);
+    if seeding == Seeding::SignChange {
+        let mut scratch = (Vec::new(), Vec::new());
+        for (k, &t) in asked.0.iter().enumerate() {
+            if answers[k] {
+                answers[k] = probe_tile(field, grid, (lo, dims), t3_of(t), &mut s, &mut scratch);
+            }
+        }
+    }
     queue.extend(asked.0.iter().zip(&answers).filter(|a| *a.1).map(|a| *a.0));
     queue.sort_unstable();
     for &t in &queue {
@@ -195,6 +204,47 @@ fn sample_corners(
     s.demands.sort_unstable();
     s.demands.dedup();
     s
+}
+
+/// Whether the 8 corners and the centre of tile `t3` of the block (`lo`, `dims`) change sign
+/// ([`Seeding::SignChange`]); the corners are stored in `s.values` like any sampled corner (the
+/// centre is a grid node too, [`TILE`] being even, but is evaluated again if the tile is sampled).
+fn probe_tile(
+    field: &dyn ScalarField,
+    grid: &Grid,
+    (lo, dims): ([usize; 3], [usize; 3]),
+    t3: [usize; 3],
+    s: &mut Sampling,
+    (pts, out): &mut (Vec<Point3>, Vec<f64>),
+) -> bool {
+    let (c0, c1) = tile_corners(t3, dims);
+    let region = tile_region(grid, lo, dims, t3);
+    let idx = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let corners = (0..8).map(|m| [0, 1, 2].map(|a| if m >> a & 1 == 0 { c0[a] } else { c1[a] }));
+    let unknown: Vec<usize> = corners
+        .clone()
+        .map(idx)
+        .filter(|&i| s.values[i].is_nan())
+        .collect();
+    pts.clear();
+    pts.push(region.center());
+    pts.extend(unknown.iter().map(|&i| {
+        let c = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        grid.corner([0, 1, 2].map(|a| lo[a] + c[a]))
+    }));
+    out.resize(pts.len(), 0.0);
+    field.values_in(&region, pts, out);
+    s.evaluations += pts.len() as u64;
+    for (&i, &v) in unknown.iter().zip(&out[1..]) {
+        // As in `sample_tile`: a NaN is stored as +inf (outside).
+        s.values[i] = if v.is_nan() { f64::INFINITY } else { v };
+    }
+    let first = inside(out[0]);
+    corners.map(idx).any(|i| inside(s.values[i]) != first)
 }
 
 /// Evaluates the not yet known corners of tile `t3` with one [`ScalarField::values_in`] call.
@@ -269,12 +319,12 @@ pub(crate) fn extract_block(
     grid: &Grid,
     table: &[[TetCase; 16]; 6],
     b: usize,
-    refine_steps: usize,
+    params: &PolygonizeParams,
     forced: &[usize],
 ) -> BlockMesh {
     let (lo, hi) = grid.block_cells(b);
     let dims = [0, 1, 2].map(|k| hi[k] - lo[k] + 1);
-    let sampled = sample_corners(field, region, grid, lo, dims, forced);
+    let sampled = sample_corners(field, region, grid, lo, dims, forced, params.seeding);
     let out = BlockMesh {
         evaluations: sampled.evaluations,
         tiles: sampled.tiles,
@@ -297,7 +347,7 @@ pub(crate) fn extract_block(
         values,
         roots: Vec::new(),
         tile: 0,
-        refine_steps,
+        refine_steps: params.refine_steps,
         out,
     };
     for k in 0..dims[2] - 1 {

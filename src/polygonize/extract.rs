@@ -1,13 +1,16 @@
 //! Sparse, parallel, watertight extraction of a field's zero set: the polygonizer's entry point.
 //!
 //! The domain is covered by a grid of cubic cells split into blocks of 16³ cells, sampled in tiles of
-//! 4³ cells. Only blocks and tiles for which [`ScalarField::may_contain_zero`] answers true are sampled
-//! (the narrow band), plus every skipped tile the zero set enters through a cell face of a sampled
-//! tile (a face whose corners have both signs), repeated across tiles and blocks to a fix point. So
-//! the mesh is exactly the one without any skipping, vertex for vertex, except for connected pieces
-//! of the zero set that lie entirely in skipped tiles; for the fitted fields those are farther than
-//! the support radius from every data point ([`crate::rbf::RbfField`]), i.e. floaters that carry no
-//! data. Each block is triangulated
+//! 4³ cells. Only blocks and tiles for which [`ScalarField::may_contain_zero`] answers true are
+//! considered (the narrow band); with the default [`super::Seeding::SignChange`] such a tile is
+//! sampled only when its 8 corners and centre change sign. From the sampled tiles, every skipped
+//! tile the zero set enters through a cell face of a sampled tile (a face whose corners have both
+//! signs) is sampled too, repeated across tiles and blocks to a fix point. So the mesh is exactly
+//! the one without any skipping, vertex for vertex, except for connected pieces of the zero set
+//! that meet no sampled tile: with [`super::Seeding::EveryTile`] pieces lying entirely in tiles the
+//! skip test ruled out (for the fitted fields, farther than the support radius from every data
+//! point, [`crate::rbf::RbfField`]: floaters that carry no data); with the sign-change seeding also
+//! small isolated bubbles (see [`super::Seeding`]). Each block is triangulated
 //! in parallel (rayon) by marching tetrahedra on the Kuhn 6-tetrahedra split (Doi & Koide 1991, "An
 //! efficient method of triangulating equi-valued surfaces by using tetrahedral cells"), which — unlike
 //! 256-case marching cubes (Lorensen & Cline 1987) — has no ambiguous faces, so the result is closed,
@@ -117,8 +120,7 @@ pub fn polygonize_in(
                     return Err(PolygonizeError::Cancelled);
                 }
                 let tiles = forced.get(&b).map_or(&[][..], Vec::as_slice);
-                let mesh =
-                    extract_block(field, region, &grid, &table, b, params.refine_steps, tiles);
+                let mesh = extract_block(field, region, &grid, &table, b, params, tiles);
                 let finished = done.fetch_add(1, Ordering::Relaxed) + 1;
                 if finished.is_multiple_of(report_every) {
                     let share = (finished as f64 / expected as f64).min(1.0);

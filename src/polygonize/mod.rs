@@ -78,4 +78,4 @@ mod refine;
 
 pub use band::DataBand;
 pub use extract::{polygonize, polygonize_in};
-pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats};
+pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats, Seeding};

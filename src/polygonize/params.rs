@@ -14,6 +14,8 @@ pub struct PolygonizeParams {
     /// interpolation along its grid edge (default 2; 0 = plain linear interpolation). Each step costs one
     /// field evaluation per vertex.
     pub refine_steps: usize,
+    /// Which tiles the zero set is followed from (default [`Seeding::SignChange`]).
+    pub seeding: Seeding,
 }
 
 impl Default for PolygonizeParams {
@@ -22,8 +24,32 @@ impl Default for PolygonizeParams {
             resolution: 128,
             max_cells: 1 << 32,
             refine_steps: 2,
+            seeding: Seeding::SignChange,
         }
     }
+}
+
+/// The tiles (4³ cells) the polygonizer samples first; from them it follows the zero set into
+/// every neighbouring tile it crosses into, so each connected piece of the zero set that meets one
+/// sampled tile's cells is extracted whole either way. The choice only decides which pieces are
+/// found at all, and the work spent on tiles the surface does not cross.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Seeding {
+    /// Every tile the field's skip test ([`super::ScalarField::may_contain_zero`]) lets through is
+    /// sampled: a piece is lost only where that test wrongly answers `false`.
+    EveryTile,
+    /// A tile the skip test lets through is first probed at its 8 corners and its centre (all
+    /// grid nodes, kept as grid values), and sampled only when those 9 values change sign.
+    /// The probe nodes of all tiles form a body-centred lattice 4 cells apart; a piece is found
+    /// when it alone separates two neighbouring probe nodes (a corner and the centre of one
+    /// tile). Every tile point is within 0.65 half diagonals (2.24 cells) of a probe node, so a
+    /// piece whose inside holds a ball of that radius, and whose outside does too, is found
+    /// unless another piece lies within one probe spacing of it on that path; what can be lost is
+    /// a small isolated bubble (under ~4.5 cells across) or a piece nested that close against
+    /// another. The tiles the surface crosses are sampled as before, the ones beside it only
+    /// probed.
+    #[default]
+    SignChange,
 }
 
 /// What the polygonizer did.

@@ -1,6 +1,6 @@
 //! The polygonizer's skip test on real fitted fields (issue 14, item 4): extracting the zero set of a
 //! field fitted to a real scan with the narrow band (blocks and tiles skipped by
-//! `may_contain_zero`) gives exactly the mesh of extracting it everywhere, vertex for vertex, for the
+//! `may_contain_zero`, and tiles seeded from sign changes only, the default `Seeding`) gives exactly the mesh of extracting it everywhere, vertex for vertex, for the
 //! default local carrier (with its winding-number far field), for several levels and for a
 //! partition of unity of blocks, with normals and without.
 
@@ -9,7 +9,7 @@ use crate::common;
 use rbfsurf::geometry::{Aabb, Point3, PointCloud};
 use rbfsurf::params::ReconParams;
 use rbfsurf::pipeline::{FittedField, fit_field};
-use rbfsurf::polygonize::{PolygonizeParams, ScalarField, polygonize};
+use rbfsurf::polygonize::{PolygonizeParams, ScalarField, Seeding, polygonize};
 use rbfsurf::progress::NoProgress;
 use rbfsurf::rbf::Blocks;
 use rbfsurf::report::Timings;
@@ -52,7 +52,12 @@ fn assert_skipping_changes_nothing(name: &str, fit: &FittedField, resolution: us
     };
     let field = fit.field.as_ref();
     let (skipped, s) = polygonize(field, &domain, &pp, &NoProgress).unwrap();
-    let (full, f) = polygonize(&Everywhere(field), &domain, &pp, &NoProgress).unwrap();
+    // The reference samples every tile: no skip test, no sign-change seeding.
+    let every = PolygonizeParams {
+        seeding: Seeding::EveryTile,
+        ..pp
+    };
+    let (full, f) = polygonize(&Everywhere(field), &domain, &every, &NoProgress).unwrap();
     assert_eq!(f.blocks_active, f.blocks_total, "{name}");
     assert!(
         s.field_evaluations < f.field_evaluations,
