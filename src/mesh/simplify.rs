@@ -75,6 +75,24 @@ fn signature(t: &MeshTopology) -> impl PartialEq + std::fmt::Debug {
 /// ```
 pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStats {
     let before = analyze(mesh);
+    if mesh.triangles.len() >= PIECE_TRIANGLES * 2
+        && tolerance.is_finite()
+        && tolerance > 0.0
+        && let Some(stats) = simplify_in_pieces(mesh, tolerance, &before)
+    {
+        return stats;
+    }
+    let locks = vec![false; mesh.vertices.len()];
+    simplify_whole(mesh, tolerance, &before, locks)
+}
+
+/// [`simplify_to_tolerance`] of the whole mesh at once, `before` its topology.
+fn simplify_whole(
+    mesh: &mut TriMesh,
+    tolerance: f64,
+    before: &MeshTopology,
+    mut locks: Vec<bool>,
+) -> SimplifyStats {
     let mut stats = SimplifyStats {
         triangles_before: mesh.triangles.len(),
         triangles_after: mesh.triangles.len(),
@@ -93,7 +111,6 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
     let options = meshopt::SimplifyOptions::ErrorAbsolute | meshopt::SimplifyOptions::LockBorder;
     let original_border = border_edges(&mesh.triangles);
     let pieces = vertex_components(mesh);
-    let mut locks = vec![false; mesh.vertices.len()];
     let mut tol = tolerance;
     for _ in 0..ATTEMPTS {
         for _ in 0..LOCK_ROUNDS {
@@ -112,7 +129,7 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
                 vertices: std::mem::take(&mut mesh.vertices),
                 ..TriMesh::default()
             };
-            let same = signature(&analyze(&probe)) == signature(&before);
+            let same = signature(&analyze(&probe)) == signature(before);
             mesh.vertices = std::mem::take(&mut probe.vertices);
             if same {
                 stats.triangles_after = probe.triangles.len();
@@ -130,6 +147,184 @@ pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStat
         tol *= 0.5;
     }
     stats
+}
+
+/// Triangles per piece of the parallel simplification (meshes of fewer than twice this many are
+/// simplified whole).
+const PIECE_TRIANGLES: usize = 20_000;
+
+/// Most pieces of the parallel simplification.
+const MAX_PIECES: usize = 16;
+
+/// [`simplify_to_tolerance`] in pieces, in parallel: the triangles are split by centroid into
+/// boxes (median cuts across the longest axis, [`split_pieces`]) and each piece is simplified
+/// alone with its border, the cut included, locked (a vertex shared with another piece lies on
+/// the piece's border, which meshoptimizer keeps). So a piece whose topology an attempt changes is
+/// redone alone (locks, halved tolerance) rather than the whole mesh, and a piece no attempt can
+/// simplify is halved and its halves tried (down to [`MIN_PIECE`] triangles). The strips along the
+/// cuts keep the grid's triangles (a few per cent more triangles); every triangle is still within
+/// the tolerance of the original mesh (each piece is simplified once, from the original).
+/// `None` when the assembled mesh's topology is not `before`'s (the caller then simplifies the
+/// mesh whole).
+fn simplify_in_pieces(
+    mesh: &mut TriMesh,
+    tolerance: f64,
+    before: &MeshTopology,
+) -> Option<SimplifyStats> {
+    use rayon::prelude::*;
+    let mut levels = 0;
+    while PIECE_TRIANGLES << (levels + 1) <= mesh.triangles.len() && 1 << (levels + 1) <= MAX_PIECES
+    {
+        levels += 1;
+    }
+    let pieces = split_pieces(&mesh.vertices, &mesh.triangles, levels);
+    let done: Vec<(Vec<[u32; 3]>, SimplifyStats)> = pieces
+        .par_iter()
+        .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance))
+        .collect();
+    let mut stats = SimplifyStats {
+        triangles_before: mesh.triangles.len(),
+        tolerance_used: tolerance,
+        ..Default::default()
+    };
+    let mut triangles = Vec::with_capacity(mesh.triangles.len());
+    for (t, st) in done {
+        triangles.extend(t);
+        stats.error = stats.error.max(st.error);
+        if st.triangles_after < st.triangles_before {
+            stats.tolerance_used = stats.tolerance_used.min(st.tolerance_used);
+        }
+    }
+    let probe = TriMesh {
+        vertices: std::mem::take(&mut mesh.vertices),
+        triangles,
+        ..TriMesh::default()
+    };
+    let same = signature(&analyze(&probe)) == signature(before);
+    mesh.vertices = probe.vertices;
+    if !same {
+        return None;
+    }
+    stats.triangles_after = probe.triangles.len();
+    mesh.triangles = probe.triangles;
+    Some(stats)
+}
+
+/// Fewest triangles of a piece that is halved when no attempt could simplify it.
+const MIN_PIECE: usize = 2_000;
+
+/// Simplifies the triangles `piece` of the mesh over `vertices` alone (its border, the cut
+/// included, locked; halved when no attempt keeps its topology); returns its triangles in the
+/// mesh's vertex ids.
+fn simplify_piece(
+    vertices: &[crate::geometry::Point3],
+    piece: &[[u32; 3]],
+    tolerance: f64,
+) -> (Vec<[u32; 3]>, SimplifyStats) {
+    let mut ids: Vec<u32> = piece.iter().flatten().copied().collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let local = |v: u32| ids.binary_search(&v).expect("a vertex of the piece") as u32;
+    let mut part = TriMesh {
+        vertices: ids.iter().map(|&v| vertices[v as usize]).collect(),
+        triangles: piece.iter().map(|t| t.map(local)).collect(),
+        ..TriMesh::default()
+    };
+    let before = analyze(&part);
+    let locks = pinch_rings(&part.triangles, part.vertices.len());
+    let stats = simplify_whole(&mut part, tolerance, &before, locks);
+    if stats.tolerance_used == 0.0 && piece.len() >= 2 * MIN_PIECE {
+        let mut out = (Vec::new(), stats);
+        for half in split_pieces(vertices, piece, 1) {
+            let (t, st) = simplify_piece(vertices, &half, tolerance);
+            out.0.extend(t);
+            out.1.error = out.1.error.max(st.error);
+            if st.tolerance_used > 0.0 {
+                out.1.tolerance_used = if out.1.tolerance_used > 0.0 {
+                    out.1.tolerance_used.min(st.tolerance_used)
+                } else {
+                    st.tolerance_used
+                };
+            }
+        }
+        out.1.triangles_after = out.0.len();
+        return out;
+    }
+    let back = part
+        .triangles
+        .iter()
+        .map(|t| t.map(|v| ids[v as usize]))
+        .collect();
+    (back, stats)
+}
+
+/// Locks for the vertices around every pinch of a piece's border (a vertex with more than two
+/// border edges, where the cut meets itself): the vertex and its neighbours. A collapse next to a
+/// pinch can join its two fans, which changes the piece's topology (a boundary loop and the Euler
+/// characteristic) without any defect to lock around.
+fn pinch_rings(triangles: &[[u32; 3]], vertices: usize) -> Vec<bool> {
+    let mut border = vec![0u32; vertices];
+    for (e, n) in edge_uses(triangles) {
+        if n == 1 {
+            border[e.0 as usize] += 1;
+            border[e.1 as usize] += 1;
+        }
+    }
+    let mut locks = vec![false; vertices];
+    for t in triangles {
+        if t.iter().any(|&v| border[v as usize] > 2) {
+            for &v in t {
+                locks[v as usize] = true;
+            }
+        }
+    }
+    locks
+}
+
+/// Splits `triangles` into `2^levels` pieces by their centroids: each box is cut across its
+/// longest axis at the median. Deterministic: ties are broken by the triangles' order, and each
+/// piece keeps the input's order.
+fn split_pieces(
+    vertices: &[crate::geometry::Point3],
+    triangles: &[[u32; 3]],
+    levels: usize,
+) -> Vec<Vec<[u32; 3]>> {
+    let centroid = |t: &[u32; 3]| {
+        [0, 1, 2].map(|k| t.iter().map(|&v| vertices[v as usize][k]).sum::<f64>() / 3.0)
+    };
+    let mut pieces: Vec<Vec<(crate::geometry::Point3, usize)>> = vec![
+        triangles
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (centroid(t), i))
+            .collect(),
+    ];
+    for _ in 0..levels {
+        let mut next = Vec::with_capacity(pieces.len() * 2);
+        for mut p in pieces {
+            let bbox = crate::geometry::Aabb::from_points(p.iter().map(|c| &c.0));
+            let e = bbox.extent();
+            let axis = (0..3).fold(0, |a, k| if e[k] > e[a] { k } else { a });
+            let at = p.len() / 2;
+            if at > 0 {
+                p.select_nth_unstable_by(at, |a, b| {
+                    a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
+                });
+            }
+            let high = p.split_off(at);
+            next.push(p);
+            next.push(high);
+        }
+        pieces = next;
+    }
+    pieces
+        .into_iter()
+        .map(|p| {
+            let mut ids: Vec<usize> = p.into_iter().map(|c| c.1).collect();
+            ids.sort_unstable();
+            ids.into_iter().map(|i| triangles[i]).collect()
+        })
+        .collect()
 }
 
 /// Rounds of locking the vertices around an attempt's defects before the tolerance is halved.
@@ -208,8 +403,19 @@ fn lock_around_defects(
     let length = |(a, b): (u32, u32)| {
         crate::geometry::dist2(mesh.vertices[a as usize], mesh.vertices[b as usize]).sqrt()
     };
-    for (e, n) in edge_uses(triangles) {
+    let uses = edge_uses(triangles);
+    for (&e, &n) in &uses {
         if n >= 3 || (n == 1 && !original_border.contains(&e)) {
+            for v in [e.0, e.1] {
+                let r = reach.entry(v).or_insert(0.0);
+                *r = r.max(length(e));
+            }
+        }
+    }
+    // A border edge of the input that two triangles now share (a collapse zipped two border
+    // stretches together: a loop splits, no new border edge shows it).
+    for &e in original_border {
+        if uses.get(&e).is_some_and(|&n| n != 1) {
             for v in [e.0, e.1] {
                 let r = reach.entry(v).or_insert(0.0);
                 *r = r.max(length(e));
