@@ -15,7 +15,7 @@ use super::store::{LevelData, PointSet, SplineData};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, TriMesh};
 use crate::params::ReconParams;
-use crate::polygonize::{PolygonizeParams, Region, polygonize_in};
+use crate::polygonize::{PolygonizeParams, Region, Seeding, polygonize_in};
 use crate::progress::Progress;
 use crate::rbf::carrier::LocalCarrier;
 use crate::rbf::{Carrier, Correction, PouBlock, RbfField, Spline, SplineLevel, plan_levels};
@@ -391,6 +391,10 @@ pub(crate) fn polygonize_region(
     };
     let pp = PolygonizeParams {
         resolution: plan.grid.resolution,
+        // A region's border cuts the surface anywhere: a piece of it that only clips the region
+        // need not change sign at any probe inside, so every tile near the data is sampled (the
+        // regions' meshes must meet exactly at their borders).
+        seeding: Seeding::EveryTile,
         ..Default::default()
     };
     let region = CellRegion {
