@@ -7,6 +7,7 @@
 //! *Polygon Mesh Processing*, 2010, ch. 1): `χ = V − E + F` and `g = (2 − χ) / 2` per closed orientable
 //! component.
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::geometry::{Point3, TriMesh, cross, dot, norm};
@@ -129,6 +130,22 @@ struct EdgeUse {
 }
 
 /// Groups the half-edges of all triangles by undirected edge (sorted by `(lo, hi)`).
+/// Whether some edge of `triangles` is used by exactly one of them (the mesh has a border):
+/// the border test of [`analyze`] alone, without the rest of its work.
+pub fn has_boundary_edge(triangles: &[[u32; 3]]) -> bool {
+    let mut keys: Vec<u64> = triangles
+        .par_iter()
+        .flat_map_iter(|t| {
+            (0..3).map(move |k| {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                ((a.min(b) as u64) << 32) | a.max(b) as u64
+            })
+        })
+        .collect();
+    keys.par_sort_unstable();
+    keys.chunk_by(|a, b| a == b).any(|run| run.len() == 1)
+}
+
 fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
     let mut half: Vec<(u64, bool)> = Vec::with_capacity(triangles.len() * 3);
     for t in triangles {
@@ -138,7 +155,7 @@ fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
             half.push((((lo as u64) << 32) | hi as u64, a <= b));
         }
     }
-    half.sort_unstable();
+    half.par_sort_unstable();
     let mut edges: Vec<EdgeUse> = Vec::new();
     for (key, fwd) in half {
         let (lo, hi) = ((key >> 32) as u32, key as u32);
@@ -376,6 +393,26 @@ mod tests {
         }
         assert!((area(&cube([1.0; 3], 2.0)) - 24.0).abs() < 1e-12);
         assert!((area(&tetrahedron()) - (1.5 + 3f64.sqrt() / 2.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_border_test_agrees_with_analyze() {
+        let closed = merge(&torus(2.0, 0.5, 24, 12), &cube([5.0; 3], 1.0));
+        assert!(!has_boundary_edge(&closed.triangles));
+        for drop in [0, 7, closed.triangles.len() - 1] {
+            let mut open = closed.clone();
+            open.triangles.remove(drop);
+            assert_eq!(analyze(&open).boundary_edges, 3);
+            assert!(has_boundary_edge(&open.triangles));
+        }
+        // An edge used three times is not a border.
+        let mut three = tetrahedron();
+        let t = three.triangles[0];
+        three.triangles.push([t[0], t[1], 3 + t[2]]);
+        three.vertices.extend(three.vertices.clone());
+        let a = analyze(&three);
+        assert_eq!(has_boundary_edge(&three.triangles), a.boundary_edges > 0);
+        assert!(!has_boundary_edge(&[]));
     }
 
     #[test]

@@ -110,7 +110,7 @@ pub(crate) fn extract_surface(
     let open = open
         || (params.boundary == Boundary::Auto
             && fit.carrier == Some(CarrierKind::Local)
-            && crate::mesh::analyze(&mesh).boundary_edges > 0);
+            && crate::mesh::topology::has_boundary_edge(&mesh.triangles));
     if open {
         let mut drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
         trim::keep_enclosed_holes(&mesh, &mut drop);
