@@ -33,6 +33,21 @@ pub struct SimplifyStats {
     pub error: f64,
 }
 
+impl SimplifyStats {
+    /// Folds in the result of a part simplified separately: the largest error, the smallest
+    /// tolerance among the parts that kept an attempt (the triangle counts are the caller's).
+    fn absorb(&mut self, part: &SimplifyStats) {
+        self.error = self.error.max(part.error);
+        if part.tolerance_used > 0.0 {
+            self.tolerance_used = if self.tolerance_used > 0.0 {
+                self.tolerance_used.min(part.tolerance_used)
+            } else {
+                part.tolerance_used
+            };
+        }
+    }
+}
+
 /// The invariants a simplification must keep.
 fn signature(t: &MeshTopology) -> impl PartialEq + std::fmt::Debug {
     (
@@ -184,16 +199,12 @@ fn simplify_in_pieces(
         .collect();
     let mut stats = SimplifyStats {
         triangles_before: mesh.triangles.len(),
-        tolerance_used: tolerance,
         ..Default::default()
     };
     let mut triangles = Vec::with_capacity(mesh.triangles.len());
     for (t, st) in done {
         triangles.extend(t);
-        stats.error = stats.error.max(st.error);
-        if st.triangles_after < st.triangles_before {
-            stats.tolerance_used = stats.tolerance_used.min(st.tolerance_used);
-        }
+        stats.absorb(&st);
     }
     let probe = TriMesh {
         vertices: std::mem::take(&mut mesh.vertices),
@@ -238,14 +249,7 @@ fn simplify_piece(
         for half in split_pieces(vertices, piece, 1) {
             let (t, st) = simplify_piece(vertices, &half, tolerance);
             out.0.extend(t);
-            out.1.error = out.1.error.max(st.error);
-            if st.tolerance_used > 0.0 {
-                out.1.tolerance_used = if out.1.tolerance_used > 0.0 {
-                    out.1.tolerance_used.min(st.tolerance_used)
-                } else {
-                    st.tolerance_used
-                };
-            }
+            out.1.absorb(&st);
         }
         out.1.triangles_after = out.0.len();
         return out;

@@ -129,23 +129,15 @@ struct EdgeUse {
     backward: u32,
 }
 
-/// Groups the half-edges of all triangles by undirected edge (sorted by `(lo, hi)`).
 /// Whether some edge of `triangles` is used by exactly one of them (the mesh has a border):
 /// the border test of [`analyze`] alone, without the rest of its work.
 pub fn has_boundary_edge(triangles: &[[u32; 3]]) -> bool {
-    let mut keys: Vec<u64> = triangles
-        .par_iter()
-        .flat_map_iter(|t| {
-            (0..3).map(move |k| {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                ((a.min(b) as u64) << 32) | a.max(b) as u64
-            })
-        })
-        .collect();
-    keys.par_sort_unstable();
-    keys.chunk_by(|a, b| a == b).any(|run| run.len() == 1)
+    collect_edges(triangles)
+        .iter()
+        .any(|e| e.forward + e.backward == 1)
 }
 
+/// Groups the half-edges of all triangles by undirected edge (sorted by `(lo, hi)`).
 fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
     let mut half: Vec<(u64, bool)> = Vec::with_capacity(triangles.len() * 3);
     for t in triangles {

@@ -221,27 +221,23 @@ fn probe_tile(
     let region = tile_region(grid, lo, dims, t3);
     let idx = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let corners = (0..8).map(|m| [0, 1, 2].map(|a| if m >> a & 1 == 0 { c0[a] } else { c1[a] }));
-    let unknown: Vec<usize> = corners
+    let unknown: Vec<[usize; 3]> = corners
         .clone()
-        .map(idx)
-        .filter(|&i| s.values[i].is_nan())
+        .filter(|&c| s.values[idx(c)].is_nan())
         .collect();
     pts.clear();
     pts.push(region.center());
-    pts.extend(unknown.iter().map(|&i| {
-        let c = [
-            i % dims[0],
-            (i / dims[0]) % dims[1],
-            i / (dims[0] * dims[1]),
-        ];
-        grid.corner([0, 1, 2].map(|a| lo[a] + c[a]))
-    }));
+    pts.extend(
+        unknown
+            .iter()
+            .map(|c| grid.corner([0, 1, 2].map(|a| lo[a] + c[a]))),
+    );
     out.resize(pts.len(), 0.0);
     field.values_in(&region, pts, out);
     s.evaluations += pts.len() as u64;
-    for (&i, &v) in unknown.iter().zip(&out[1..]) {
+    for (&c, &v) in unknown.iter().zip(&out[1..]) {
         // As in `sample_tile`: a NaN is stored as +inf (outside).
-        s.values[i] = if v.is_nan() { f64::INFINITY } else { v };
+        s.values[idx(c)] = if v.is_nan() { f64::INFINITY } else { v };
     }
     let first = inside(out[0]);
     corners.map(idx).any(|i| inside(s.values[i]) != first)
