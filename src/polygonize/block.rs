@@ -10,7 +10,7 @@
 use super::grid::Grid;
 use super::kuhn::{CubeEdge, TETS, TetCase};
 use super::refine::{EdgeRoot, place_vertices};
-use super::{PolygonizeParams, Region, ScalarField, Seeding};
+use super::{PolygonizeParams, Region, RegionField, ScalarField, Seeding};
 use crate::geometry::{Aabb, Point3};
 
 /// How a tile of a block was treated.
@@ -156,11 +156,25 @@ fn sample_corners(
     }
     let mut answers = vec![false; asked.0.len()];
     field.may_contain_zero_each(&asked.1, &mut answers);
+    let mut scratch = (Vec::new(), Vec::new(), Vec::new());
     if seeding == Seeding::SignChange {
-        let mut scratch = (Vec::new(), Vec::new());
+        // A tile whose probe changes sign is sampled at once, on the same gather.
         for (k, &t) in asked.0.iter().enumerate() {
             if answers[k] {
-                answers[k] = probe_tile(field, grid, (lo, dims), t3_of(t), &mut s, &mut scratch);
+                let mut prepared = field.prepare(&tile_box(t3_of(t)));
+                let f = &mut *prepared;
+                answers[k] = probe_tile(f, grid, (lo, dims), t3_of(t), &mut s, &mut scratch);
+                if answers[k] {
+                    s.evaluations += sample_tile(
+                        Some(f),
+                        field,
+                        grid,
+                        (lo, dims),
+                        t3_of(t),
+                        &mut s.values,
+                        &mut scratch,
+                    );
+                }
             }
         }
     }
@@ -169,12 +183,19 @@ fn sample_corners(
     for &t in &queue {
         s.tiles[t] = TileState::Sampled;
     }
-    let mut scratch = (Vec::new(), Vec::new(), Vec::new());
     while !queue.is_empty() {
         queue.sort_unstable();
         for &t in &queue {
-            s.evaluations +=
-                sample_tile(field, grid, lo, dims, t3_of(t), &mut s.values, &mut scratch);
+            let t3 = t3_of(t);
+            s.evaluations += sample_tile(
+                None,
+                field,
+                grid,
+                (lo, dims),
+                t3,
+                &mut s.values,
+                &mut scratch,
+            );
         }
         let mut next = Vec::new();
         for &t in &queue {
@@ -210,12 +231,12 @@ fn sample_corners(
 /// ([`Seeding::SignChange`]); the corners are stored in `s.values` like any sampled corner (the
 /// centre is a grid node too, [`TILE`] being even, but is evaluated again if the tile is sampled).
 fn probe_tile(
-    field: &dyn ScalarField,
+    field: &mut dyn RegionField,
     grid: &Grid,
     (lo, dims): ([usize; 3], [usize; 3]),
     t3: [usize; 3],
     s: &mut Sampling,
-    (pts, out): &mut (Vec<Point3>, Vec<f64>),
+    (pts, out, _): &mut (Vec<Point3>, Vec<f64>, Vec<usize>),
 ) -> bool {
     let (c0, c1) = tile_corners(t3, dims);
     let region = tile_region(grid, lo, dims, t3);
@@ -233,7 +254,7 @@ fn probe_tile(
             .map(|c| grid.corner([0, 1, 2].map(|a| lo[a] + c[a]))),
     );
     out.resize(pts.len(), 0.0);
-    field.values_in(&region, pts, out);
+    field.values(pts, out);
     s.evaluations += pts.len() as u64;
     for (&c, &v) in unknown.iter().zip(&out[1..]) {
         // As in `sample_tile`: a NaN is stored as +inf (outside).
@@ -243,12 +264,14 @@ fn probe_tile(
     corners.map(idx).any(|i| inside(s.values[i]) != first)
 }
 
-/// Evaluates the not yet known corners of tile `t3` with one [`ScalarField::values_in`] call.
+/// Evaluates the not yet known corners of tile `t3` in one call: on `prepared` (the field
+/// prepared for the tile) if given, else on `field` prepared here (not at all when every corner
+/// is known).
 fn sample_tile(
+    prepared: Option<&mut dyn RegionField>,
     field: &dyn ScalarField,
     grid: &Grid,
-    lo: [usize; 3],
-    dims: [usize; 3],
+    (lo, dims): ([usize; 3], [usize; 3]),
     t3: [usize; 3],
     values: &mut [f64],
     (pts, out, slots): &mut (Vec<Point3>, Vec<f64>, Vec<usize>),
@@ -268,8 +291,14 @@ fn sample_tile(
             }
         }
     }
+    if pts.is_empty() {
+        return 0;
+    }
     out.resize(pts.len(), 0.0);
-    field.values_in(&region, pts, out);
+    match prepared {
+        Some(f) => f.values(pts, out),
+        None => field.prepare(&region).values(pts, out),
+    }
     for (&s, &v) in slots.iter().zip(out.iter()) {
         // A NaN from the field is stored as +inf: outside, and never re-evaluated.
         values[s] = if v.is_nan() { f64::INFINITY } else { v };
@@ -376,8 +405,9 @@ impl Block<'_> {
         {
             let roots: Vec<EdgeRoot> = group.iter().map(|&v| self.roots[v as usize]).collect();
             let region = tile_region(self.grid, self.lo, self.dims, t3_of(roots[0].tile));
+            let mut prepared = self.field.prepare(&region);
             let (positions, normals, evaluations) =
-                place_vertices(self.field, &region, &roots, self.refine_steps);
+                place_vertices(&mut *prepared, &roots, self.refine_steps);
             for ((&v, p), n) in group.iter().zip(positions).zip(normals) {
                 self.out.positions[v as usize] = p;
                 self.out.normals[v as usize] = n;

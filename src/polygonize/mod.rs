@@ -30,6 +30,17 @@ pub trait ScalarField: Sync {
             *o = self.value(p);
         }
     }
+    /// The field prepared for many evaluations inside `region`: a field backed by a spatial index
+    /// gathers its candidates once here instead of once per [`ScalarField::values_in`] call (the
+    /// polygonizer probes, samples and refines one tile with one gather). Values and gradients are
+    /// those of [`ScalarField::values_in`] and [`ScalarField::gradients_in`] over the same region,
+    /// bit for bit. Default: those calls, one per use.
+    fn prepare<'a>(&'a self, region: &Aabb) -> Box<dyn RegionField + 'a> {
+        Box::new(PerCall {
+            field: self,
+            region: *region,
+        })
+    }
     /// Skip test: `false` when the zero set is not expected to meet `cell`, so the polygonizer need
     /// not sample it. Returning `true` always is correct but slow. The polygonizer does not trust a
     /// `false` blindly: a skipped tile that the zero set enters from a sampled neighbour is sampled
@@ -43,6 +54,31 @@ pub trait ScalarField: Sync {
         for (c, o) in cells.iter().zip(out.iter_mut()) {
             *o = self.may_contain_zero(c);
         }
+    }
+}
+
+/// A [`ScalarField`] prepared for evaluations inside one region ([`ScalarField::prepare`]); every
+/// point passed must lie inside that region.
+pub trait RegionField {
+    /// `out[i] = f(points[i])`, as [`ScalarField::values_in`] over the region.
+    fn values(&mut self, points: &[Point3], out: &mut [f64]);
+    /// `out[i] = ∇f(points[i])`, as [`ScalarField::gradients_in`] over the region.
+    fn gradients(&mut self, points: &[Point3], out: &mut [Point3]);
+}
+
+/// [`ScalarField::prepare`]'s default: the field's region calls, one per use.
+pub(crate) struct PerCall<'a, F: ScalarField + ?Sized> {
+    pub(crate) field: &'a F,
+    pub(crate) region: Aabb,
+}
+
+impl<F: ScalarField + ?Sized> RegionField for PerCall<'_, F> {
+    fn values(&mut self, points: &[Point3], out: &mut [f64]) {
+        self.field.values_in(&self.region, points, out);
+    }
+
+    fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
+        self.field.gradients_in(&self.region, points, out);
     }
 }
 

@@ -1,15 +1,14 @@
 //! Vertex placement on the grid edges that cross the zero set: linear interpolation, then a few
 //! safeguarded root-finding steps (inverse quadratic interpolation as in Brent 1973, else
 //! Anderson–Björck regula falsi, else bisection; Dowell & Jarratt 1971), then the unit normal from
-//! the field's gradient. The vertices of one tile are moved together: each step is one
-//! [`ScalarField::values_in`] call over the tile's box and the normals one
-//! [`ScalarField::gradients_in`] call, so a field backed by a spatial index gathers its candidates
-//! once per tile and step instead of once per vertex.
+//! the field's gradient. The vertices of one tile are moved together, on the field prepared for
+//! the tile's box ([`super::ScalarField::prepare`]): a field backed by a spatial index gathers its
+//! candidates once per tile instead of once per vertex or step.
 //!
 //! `O(v · (s + 1))` field evaluations for `v` vertices and `s` steps.
 
-use super::ScalarField;
-use crate::geometry::{Aabb, Point3, add, normalized, scale, sub};
+use super::RegionField;
+use crate::geometry::{Point3, add, normalized, scale, sub};
 
 /// A grid edge with a sign change: its inside end (`f_in < 0`) and outside end (`f_out ≥ 0` or
 /// NaN), and the block-local tile of the cell that made it.
@@ -30,8 +29,7 @@ pub(crate) struct EdgeRoot {
 /// Positions and unit normals of the vertices on `roots`, all inside `region`, after `steps`
 /// root-finding steps; plus the number of field values evaluated (gradients not counted).
 pub(crate) fn place_vertices(
-    field: &dyn ScalarField,
-    region: &Aabb,
+    field: &mut dyn RegionField,
     roots: &[EdgeRoot],
     steps: usize,
 ) -> (Vec<Point3>, Vec<Point3>, u64) {
@@ -55,7 +53,7 @@ pub(crate) fn place_vertices(
         pts.clear();
         pts.extend(which.iter().map(|&i| at(&roots[i], state[i].1)));
         vals.resize(pts.len(), 0.0);
-        field.values_in(region, &pts, &mut vals);
+        field.values(&pts, &mut vals);
         evaluations += pts.len() as u64;
         for (&i, &f) in which.iter().zip(&vals) {
             let (b, t, done) = &mut state[i];
@@ -71,7 +69,7 @@ pub(crate) fn place_vertices(
         .map(|(r, s)| if r.f_out == 0.0 { r.p_out } else { at(r, s.1) })
         .collect();
     let mut gradients = vec![[0.0; 3]; positions.len()];
-    field.gradients_in(region, &positions, &mut gradients);
+    field.gradients(&positions, &mut gradients);
     let normals = (roots.iter().zip(&gradients))
         .map(|(r, g)| {
             normalized(*g)
