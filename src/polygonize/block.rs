@@ -54,6 +54,8 @@ fn inside(f: f64) -> bool {
 /// Working state of one block.
 struct Block<'a> {
     field: &'a dyn ScalarField,
+    /// The field prepared for each sampled tile ([`Sampling::prepared`]).
+    prepared: Vec<Option<Box<dyn RegionField + 'a>>>,
     region: &'a dyn Region,
     grid: &'a Grid,
     lo: [usize; 3],
@@ -91,11 +93,14 @@ pub(crate) fn tile_counts(dims: [usize; 3]) -> [usize; 3] {
 /// borders a skipped tile; faces on the block's border give [`BlockMesh::demands`] to the caller.
 /// So the skip test is an optimisation only: every piece of the zero set that meets a sampled cell
 /// is extracted whole, whatever the test answers (see [`super::extract`]).
-struct Sampling {
+struct Sampling<'a> {
     values: Vec<f64>,
     tiles: Vec<TileState>,
     evaluations: u64,
     demands: Vec<[usize; 3]>,
+    /// The field prepared for each sampled tile, kept for placing the tile's vertices (one
+    /// gather per tile for probe, samples, refinement and normals).
+    prepared: Vec<Option<Box<dyn RegionField + 'a>>>,
 }
 
 /// Local corners `[c0, c1]` (inclusive) of tile `t3`.
@@ -116,15 +121,15 @@ fn tile_region(grid: &Grid, lo: [usize; 3], dims: [usize; 3], t3: [usize; 3]) ->
 
 /// Samples the corners of the block at grid cell `lo` with `dims` corners per axis; `forced` lists
 /// tiles (local index, x fastest) to sample whatever the skip test says.
-fn sample_corners(
-    field: &dyn ScalarField,
+fn sample_corners<'a>(
+    field: &'a dyn ScalarField,
     keep: &dyn Region,
     grid: &Grid,
     lo: [usize; 3],
     dims: [usize; 3],
     forced: &[usize],
     seeding: Seeding,
-) -> Sampling {
+) -> Sampling<'a> {
     let tiles = tile_counts(dims);
     let count = tiles[0] * tiles[1] * tiles[2];
     let t3_of = |t: usize| {
@@ -140,6 +145,7 @@ fn sample_corners(
         tiles: vec![TileState::Skipped; count],
         evaluations: 0,
         demands: Vec::new(),
+        prepared: (0..count).map(|_| None).collect(),
     };
     let mut queue = Vec::new();
     let mut asked = (Vec::new(), Vec::new());
@@ -165,8 +171,9 @@ fn sample_corners(
                 let f = &mut *prepared;
                 answers[k] = probe_tile(f, grid, (lo, dims), t3_of(t), &mut s, &mut scratch);
                 if answers[k] {
+                    s.prepared[t] = Some(prepared);
                     s.evaluations += sample_tile(
-                        Some(f),
+                        &mut s.prepared[t],
                         field,
                         grid,
                         (lo, dims),
@@ -188,7 +195,7 @@ fn sample_corners(
         for &t in &queue {
             let t3 = t3_of(t);
             s.evaluations += sample_tile(
-                None,
+                &mut s.prepared[t],
                 field,
                 grid,
                 (lo, dims),
@@ -264,12 +271,11 @@ fn probe_tile(
     corners.map(idx).any(|i| inside(s.values[i]) != first)
 }
 
-/// Evaluates the not yet known corners of tile `t3` in one call: on `prepared` (the field
-/// prepared for the tile) if given, else on `field` prepared here (not at all when every corner
-/// is known).
-fn sample_tile(
-    prepared: Option<&mut dyn RegionField>,
-    field: &dyn ScalarField,
+/// Evaluates the not yet known corners of tile `t3` in one call, on `prepared` (the field
+/// prepared for the tile; prepared here and kept when `None` and a corner is unknown).
+fn sample_tile<'a>(
+    prepared: &mut Option<Box<dyn RegionField + 'a>>,
+    field: &'a dyn ScalarField,
     grid: &Grid,
     (lo, dims): ([usize; 3], [usize; 3]),
     t3: [usize; 3],
@@ -295,10 +301,9 @@ fn sample_tile(
         return 0;
     }
     out.resize(pts.len(), 0.0);
-    match prepared {
-        Some(f) => f.values(pts, out),
-        None => field.prepare(&region).values(pts, out),
-    }
+    prepared
+        .get_or_insert_with(|| field.prepare(&region))
+        .values(pts, out);
     for (&s, &v) in slots.iter().zip(out.iter()) {
         // A NaN from the field is stored as +inf: outside, and never re-evaluated.
         values[s] = if v.is_nan() { f64::INFINITY } else { v };
@@ -363,6 +368,7 @@ pub(crate) fn extract_block(
     }
     let mut block = Block {
         field,
+        prepared: sampled.prepared,
         region,
         grid,
         lo,
@@ -405,7 +411,8 @@ impl Block<'_> {
         {
             let roots: Vec<EdgeRoot> = group.iter().map(|&v| self.roots[v as usize]).collect();
             let region = tile_region(self.grid, self.lo, self.dims, t3_of(roots[0].tile));
-            let mut prepared = self.field.prepare(&region);
+            let mut prepared = (self.prepared[roots[0].tile].take())
+                .unwrap_or_else(|| self.field.prepare(&region));
             let (positions, normals, evaluations) =
                 place_vertices(&mut *prepared, &roots, self.refine_steps);
             for ((&v, p), n) in group.iter().zip(positions).zip(normals) {
