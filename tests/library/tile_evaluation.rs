@@ -120,3 +120,76 @@ fn tile_lists_give_the_index_queries_values_bit_for_bit_on_real_scans() {
         }
     }
 }
+
+/// A field prepared for a tile (`ScalarField::prepare`, what the polygonizer probes, samples and
+/// refines on) answers its first few points with per-point queries and the rest from gathered
+/// lists: both must give the values of one batched `values_in` over the same tile bit for bit, and
+/// the gradients of `gradients_in`; and agree with the plain per-point `value`/`gradient` to
+/// rounding.
+#[test]
+fn a_prepared_tile_gives_the_batched_values_bit_for_bit() {
+    use rbfsurf::polygonize::ScalarField;
+    let kitten =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
+    let fit = fit_field(
+        &kitten,
+        &ReconParams::default(),
+        &NoProgress,
+        &mut Timings::default(),
+    )
+    .unwrap();
+    let field = fit.rbf.as_ref().unwrap();
+    let r = fit.support_radius;
+    let tile = 4.0 * r / 3.75;
+    let (mut tiles, mut single) = (0, 0);
+    for (k, p) in kitten.points.iter().enumerate().step_by(97) {
+        // A tile around a data point, shifted off the grid of the points' coordinates.
+        let min: Point3 = [0, 1, 2].map(|a| p[a] - tile * [0.3, 0.55, 0.7][a]);
+        let region = Aabb {
+            min,
+            max: min.map(|v| v + tile),
+        };
+        let pts: Vec<Point3> = (0..40)
+            .map(|i| {
+                let u = [0.13, 0.37, 0.71]
+                    .map(|s: f64| ((i as f64 + 1.0) * s + k as f64 * 0.01).fract());
+                [0, 1, 2].map(|a| min[a] + u[a] * tile)
+            })
+            .collect();
+        let mut batched = vec![0.0; pts.len()];
+        field.values_in(&region, &pts, &mut batched);
+        // The probe's pattern: one centre, then 8 corners, then the rest in one call.
+        let mut prepared = field.prepare(&region);
+        let mut got = vec![0.0; pts.len()];
+        prepared.values(&pts[..1], &mut got[..1]);
+        prepared.values(&pts[1..9], &mut got[1..9]);
+        prepared.values(&pts[9..], &mut got[9..]);
+        single += 9;
+        for (i, x) in pts.iter().enumerate() {
+            assert_eq!(got[i].to_bits(), batched[i].to_bits(), "value {i} at {x:?}");
+            let plain = field.value(x);
+            assert!(
+                (plain - got[i]).abs() <= 1e-12 * (1.0 + plain.abs()),
+                "{plain} vs {}",
+                got[i]
+            );
+        }
+        let mut g_batched = vec![[0.0; 3]; pts.len()];
+        field.gradients_in(&region, &pts, &mut g_batched);
+        let mut g_got = vec![[0.0; 3]; pts.len()];
+        prepared.gradients(&pts, &mut g_got);
+        for (i, x) in pts.iter().enumerate() {
+            assert_eq!(
+                g_got[i].map(f64::to_bits),
+                g_batched[i].map(f64::to_bits),
+                "gradient {i}"
+            );
+            let plain = field.gradient(x);
+            for a in 0..3 {
+                assert!((plain[a] - g_got[i][a]).abs() <= 1e-9 * (1.0 + plain[a].abs()));
+            }
+        }
+        tiles += 1;
+    }
+    assert!(tiles > 40 && single > 300, "{tiles} tiles");
+}
