@@ -164,24 +164,9 @@ fn sample_corners<'a>(
     field.may_contain_zero_each(&asked.1, &mut answers);
     let mut scratch = (Vec::new(), Vec::new(), Vec::new());
     if seeding == Seeding::SignChange {
-        // A tile whose probe changes sign is sampled at once, on the same gather.
         for (k, &t) in asked.0.iter().enumerate() {
             if answers[k] {
-                let mut prepared = field.prepare(&tile_box(t3_of(t)));
-                let f = &mut *prepared;
-                answers[k] = probe_tile(f, grid, (lo, dims), t3_of(t), &mut s, &mut scratch);
-                if answers[k] {
-                    s.prepared[t] = Some(prepared);
-                    s.evaluations += sample_tile(
-                        &mut s.prepared[t],
-                        field,
-                        grid,
-                        (lo, dims),
-                        t3_of(t),
-                        &mut s.values,
-                        &mut scratch,
-                    );
-                }
+                answers[k] = probe_and_sample(field, grid, (lo, dims), t, &mut s, &mut scratch);
             }
         }
     }
@@ -193,13 +178,12 @@ fn sample_corners<'a>(
     while !queue.is_empty() {
         queue.sort_unstable();
         for &t in &queue {
-            let t3 = t3_of(t);
             s.evaluations += sample_tile(
                 &mut s.prepared[t],
                 field,
                 grid,
                 (lo, dims),
-                t3,
+                t3_of(t),
                 &mut s.values,
                 &mut scratch,
             );
@@ -232,6 +216,40 @@ fn sample_corners<'a>(
     s.demands.sort_unstable();
     s.demands.dedup();
     s
+}
+
+/// [`probe_tile`] on tile `t` (local index) of the block (`lo`, `dims`) and, when the probe
+/// changes sign, [`sample_tile`] at once on the same prepared field (kept in `s.prepared`).
+fn probe_and_sample<'a>(
+    field: &'a dyn ScalarField,
+    grid: &Grid,
+    (lo, dims): ([usize; 3], [usize; 3]),
+    t: usize,
+    s: &mut Sampling<'a>,
+    scratch: &mut (Vec<Point3>, Vec<f64>, Vec<usize>),
+) -> bool {
+    let tiles = tile_counts(dims);
+    let t3 = [
+        t % tiles[0],
+        (t / tiles[0]) % tiles[1],
+        t / (tiles[0] * tiles[1]),
+    ];
+    let mut prepared = field.prepare(&tile_region(grid, lo, dims, t3));
+    if !probe_tile(&mut *prepared, grid, (lo, dims), t3, s, scratch) {
+        return false;
+    }
+    s.prepared[t] = Some(prepared);
+    let sampled = sample_tile(
+        &mut s.prepared[t],
+        field,
+        grid,
+        (lo, dims),
+        t3,
+        &mut s.values,
+        scratch,
+    );
+    s.evaluations += sampled;
+    true
 }
 
 /// Whether the 8 corners and the centre of tile `t3` of the block (`lo`, `dims`) change sign
