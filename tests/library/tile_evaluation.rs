@@ -8,7 +8,7 @@ use crate::common;
 
 use rbfsurf::geometry::{Aabb, Point3, PointCloud, dist2};
 use rbfsurf::params::ReconParams;
-use rbfsurf::pipeline::fit_field;
+use rbfsurf::pipeline::{FittedField, fit_field};
 use rbfsurf::progress::NoProgress;
 use rbfsurf::rbf::carrier::{FAR_NEIGHBOURS, LocalCarrier, NearPoints};
 use rbfsurf::rbf::{Carrier, RbfField};
@@ -84,6 +84,17 @@ fn compare_tiles(name: &str, field: &RbfField, tile: f64, reach: f64) -> (usize,
     (compared, widened)
 }
 
+/// The field of `cloud` fitted with the default parameters.
+fn fitted(cloud: &PointCloud) -> FittedField {
+    fit_field(
+        cloud,
+        &ReconParams::default(),
+        &NoProgress,
+        &mut Timings::default(),
+    )
+    .unwrap()
+}
+
 #[test]
 fn tile_lists_give_the_index_queries_values_bit_for_bit_on_real_scans() {
     let kitten =
@@ -100,13 +111,7 @@ fn tile_lists_give_the_index_queries_values_bit_for_bit_on_real_scans() {
         ("kitten without normals", &bare),
         ("bunny 10k", &bunny),
     ] {
-        let fit = fit_field(
-            cloud,
-            &ReconParams::default(),
-            &NoProgress,
-            &mut Timings::default(),
-        )
-        .unwrap();
+        let fit = fitted(cloud);
         let field = fit.rbf.as_ref().unwrap();
         let r = fit.support_radius;
         // Tiles as the polygonizer's (4 cells of about R / 3.75), out to twice R from the data
@@ -131,13 +136,7 @@ fn a_prepared_tile_gives_the_batched_values_bit_for_bit() {
     use rbfsurf::polygonize::ScalarField;
     let kitten =
         rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &Default::default()).unwrap();
-    let fit = fit_field(
-        &kitten,
-        &ReconParams::default(),
-        &NoProgress,
-        &mut Timings::default(),
-    )
-    .unwrap();
+    let fit = fitted(&kitten);
     let field = fit.rbf.as_ref().unwrap();
     let r = fit.support_radius;
     let tile = 4.0 * r / 3.75;
