@@ -629,6 +629,9 @@ impl LocalCarrier {
     /// [`Self::evaluate`] where fewer than K usable points lie within `R` of `x`: the weights
     /// widen to the K nearest ones (found with the k-d tree).
     fn evaluate_widened<const GRAD: bool>(&self, x: &Point3) -> (f64, Point3) {
+        if let Some(far) = self.decided_far_field::<GRAD>(x) {
+            return far;
+        }
         let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
         self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
         let (Some(&(_, d1)), Some(&(_, rho))) = (knn.first(), knn.last()) else {
@@ -653,6 +656,36 @@ impl LocalCarrier {
         let far = self.points[ids[ids.len() - 1] as usize];
         let grad_rho = normalized(sub(*x, far)).unwrap_or([0.0; 3]);
         self.blend::<GRAD>(x, ids, rho, Some(grad_rho))
+    }
+
+    /// The carrier where the far field alone decides (`τ_far = 1`: at least `1.5 R` from the
+    /// data and the winding number decided, `|1 − 2w| ≥ 0.6`): there
+    /// [`Self::with_far_field`] gives `g = 0 · g_local + 1 · d₁ (1 − 2w)` and the planes' blend
+    /// does not count, so their K-nearest query is skipped (the same value bit for bit, and the
+    /// same gradient unless two points tie for the nearest). `None` elsewhere.
+    fn decided_far_field<const GRAD: bool>(&self, x: &Point3) -> Option<(f64, Point3)> {
+        let w = self.winding.as_ref()?;
+        if !self.far_field.load(Ordering::Relaxed) {
+            return None;
+        }
+        let (i, d1) = self.valid_tree.nearest_one(x)?;
+        let r = self.radius;
+        // The expressions of `with_far_field`, so that "fully on" means the same there.
+        if smoothstep((d1 - FAR_FROM * r) / r).0 != 1.0 {
+            return None;
+        }
+        let (wv, wg) = w.value_gradient(x);
+        let a = 1.0 - 2.0 * wv;
+        if smoothstep((a.abs() - 0.2) / 0.4).0 != 1.0 {
+            return None;
+        }
+        let g = d1 * a;
+        if !GRAD {
+            return Some((g, [0.0; 3]));
+        }
+        let nearest = self.points[self.valid_ids[i as usize] as usize];
+        let dd1 = normalized(sub(*x, nearest)).unwrap_or([0.0; 3]);
+        Some((g, [0, 1, 2].map(|k| d1 * (-2.0 * wg[k]) + a * dd1[k])))
     }
 
     /// `local` (the planes' blend at `x`) with the winding far field where it applies; `d1` is
