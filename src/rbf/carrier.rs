@@ -629,9 +629,14 @@ impl LocalCarrier {
     /// [`Self::evaluate`] where fewer than K usable points lie within `R` of `x`: the weights
     /// widen to the K nearest ones (found with the k-d tree).
     fn evaluate_widened<const GRAD: bool>(&self, x: &Point3) -> (f64, Point3) {
-        if let Some(far) = self.decided_far_field::<GRAD>(x) {
-            return far;
+        match self.decided_far_field::<GRAD>(x) {
+            Some(far) => far,
+            None => self.nearest_planes_with_far_field::<GRAD>(x),
         }
+    }
+
+    /// [`Self::evaluate_widened`] through the K nearest planes, whatever the far field's weight.
+    fn nearest_planes_with_far_field<const GRAD: bool>(&self, x: &Point3) -> (f64, Point3) {
         let mut knn = Vec::with_capacity(FAR_NEIGHBOURS);
         self.valid_tree.nearest_k(x, FAR_NEIGHBOURS, &mut knn);
         let (Some(&(_, d1)), Some(&(_, rho))) = (knn.first(), knn.last()) else {
@@ -882,6 +887,29 @@ mod tests {
             crate::spatial::build_index(p, crate::spatial::IndexKind::KdTree, 16).unwrap(),
         );
         LocalCarrier::new(p, n, r, index).unwrap()
+    }
+
+    #[test]
+    fn the_decided_far_field_is_the_blend_it_replaces() {
+        let (p, n) = sphere_points(2000, [0.5, 0.5, 0.5], 0.25);
+        let c = local(&p, &n, 0.05);
+        let (mut decided, mut undecided) = (0, 0);
+        for i in 0..20 * 20 * 20 {
+            let x = [i % 20, (i / 20) % 20, i / 400].map(|k| (k as f64 + 0.37) / 20.0);
+            let full = c.nearest_planes_with_far_field::<true>(&x);
+            let Some(far) = c.decided_far_field::<true>(&x) else {
+                undecided += 1;
+                continue;
+            };
+            decided += 1;
+            assert_eq!(far.0.to_bits(), full.0.to_bits(), "value at {x:?}");
+            for k in 0..3 {
+                assert!((far.1[k] - full.1[k]).abs() <= 1e-12, "{far:?} vs {full:?}");
+            }
+            assert_eq!(c.value_gradient_with(&x, &[]).0.to_bits(), far.0.to_bits());
+        }
+        // Inside the ball away from the shell and far outside: decided; near the shell: not.
+        assert!(decided > 4000 && undecided > 500, "{decided} / {undecided}");
     }
 
     #[test]
