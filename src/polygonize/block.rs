@@ -103,6 +103,15 @@ struct Sampling<'a> {
     prepared: Vec<Option<Box<dyn RegionField + 'a>>>,
 }
 
+/// Coordinates of local tile `t` (x fastest) of a block with `tiles` tiles per axis.
+fn tile_coords(t: usize, tiles: [usize; 3]) -> [usize; 3] {
+    [
+        t % tiles[0],
+        (t / tiles[0]) % tiles[1],
+        t / (tiles[0] * tiles[1]),
+    ]
+}
+
 /// Local corners `[c0, c1]` (inclusive) of tile `t3`.
 fn tile_corners(t3: [usize; 3], dims: [usize; 3]) -> ([usize; 3], [usize; 3]) {
     let c0 = t3.map(|a| a * TILE);
@@ -132,13 +141,7 @@ fn sample_corners<'a>(
 ) -> Sampling<'a> {
     let tiles = tile_counts(dims);
     let count = tiles[0] * tiles[1] * tiles[2];
-    let t3_of = |t: usize| {
-        [
-            t % tiles[0],
-            (t / tiles[0]) % tiles[1],
-            t / (tiles[0] * tiles[1]),
-        ]
-    };
+    let t3_of = |t: usize| tile_coords(t, tiles);
     let tile_box = |t3: [usize; 3]| tile_region(grid, lo, dims, t3);
     let mut s = Sampling {
         values: vec![f64::NAN; dims.iter().product()],
@@ -228,12 +231,7 @@ fn probe_and_sample<'a>(
     s: &mut Sampling<'a>,
     scratch: &mut (Vec<Point3>, Vec<f64>, Vec<usize>),
 ) -> bool {
-    let tiles = tile_counts(dims);
-    let t3 = [
-        t % tiles[0],
-        (t / tiles[0]) % tiles[1],
-        t / (tiles[0] * tiles[1]),
-    ];
+    let t3 = tile_coords(t, tile_counts(dims));
     let mut prepared = field.prepare(&tile_region(grid, lo, dims, t3));
     if !probe_tile(&mut *prepared, grid, (lo, dims), t3, s, scratch) {
         return false;
@@ -420,10 +418,7 @@ impl Block<'_> {
     fn place_vertices(&mut self) {
         let mut order: Vec<u32> = (0..self.roots.len() as u32).collect();
         order.sort_by_key(|&v| self.roots[v as usize].tile);
-        let t3_of = |t: usize| {
-            let n = self.tiles;
-            [t % n[0], (t / n[0]) % n[1], t / (n[0] * n[1])]
-        };
+        let t3_of = |t: usize| tile_coords(t, self.tiles);
         for group in
             order.chunk_by(|a, b| self.roots[*a as usize].tile == self.roots[*b as usize].tile)
         {

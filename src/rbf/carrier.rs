@@ -237,6 +237,18 @@ const GUARD_DECIDED: (f64, f64) = (0.6, 0.9);
 /// Disagreement `−g (1 − 2w)` (normalised units, in support radii) at which the guard is fully on.
 const GUARD_SCALE: f64 = 0.125;
 
+/// Weight of the far field by distance from the data, `s((d₁ − R/2)/R)`, and its derivative in
+/// `(d₁ − R/2)/R` (see [`LocalCarrier`]'s far field).
+fn far_ramp(d1: f64, radius: f64) -> (f64, f64) {
+    smoothstep((d1 - FAR_FROM * radius) / radius)
+}
+
+/// Confidence of the winding number `c(a)`, `a = 1 − 2w`: 0 for `|a| ≤ 0.2`, 1 for `|a| ≥ 0.6`;
+/// and its derivative in `(|a| − 0.2)/0.4`.
+fn far_confidence(a: f64) -> (f64, f64) {
+    smoothstep((a.abs() - 0.2) / 0.4)
+}
+
 /// The C¹ smoothstep `3u² − 2u³` of `u` clamped to [0, 1], and its derivative.
 fn smoothstep(u: f64) -> (f64, f64) {
     let v = u.clamp(0.0, 1.0);
@@ -674,14 +686,13 @@ impl LocalCarrier {
             return None;
         }
         let (i, d1) = self.valid_tree.nearest_one(x)?;
-        let r = self.radius;
-        // The expressions of `with_far_field`, so that "fully on" means the same there.
-        if smoothstep((d1 - FAR_FROM * r) / r).0 != 1.0 {
+        // The weights of `with_far_field`: "fully on" means the same there.
+        if far_ramp(d1, self.radius).0 != 1.0 {
             return None;
         }
         let (wv, wg) = w.value_gradient(x);
         let a = 1.0 - 2.0 * wv;
-        if smoothstep((a.abs() - 0.2) / 0.4).0 != 1.0 {
+        if far_confidence(a).0 != 1.0 {
             return None;
         }
         let g = d1 * a;
@@ -750,11 +761,11 @@ impl LocalCarrier {
         nearest: Point3,
     ) -> (f64, Point3) {
         let r = self.radius;
-        let (s1, ds1) = smoothstep((d1 - FAR_FROM * r) / r);
+        let (s1, ds1) = far_ramp(d1, r);
         let (s2, ds2) = smoothstep((d1 - GUARD_FROM * r) / (GUARD_WIDTH * r));
         let (wv, wg) = w.value_gradient(x);
         let a = 1.0 - 2.0 * wv;
-        let (c, dc) = smoothstep((a.abs() - 0.2) / 0.4);
+        let (c, dc) = far_confidence(a);
         let dc_dw = dc / 0.4 * -2.0 * a.signum();
         // The guard asks more of the winding number: `w` within 0.05 of 0 or 1 (beside an open
         // sheet, e.g. under a single range image near its rim, `w` is 0.2–0.5 and the planes
