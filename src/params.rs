@@ -548,7 +548,7 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub ordering: Option<OrderingKind>,
-    /// Solver: auto (default: sparse when its factor fits --max-memory-mib, else cg), sparse (faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl), cg (Jacobi-preconditioned conjugate gradients, no factor).
+    /// Solver: auto (default: conjugate gradients first when smoothing λ ≥ 0.1, falling back to sparse after 250 iterations; otherwise sparse when its factor fits --max-memory-mib, else cg), sparse (faer supernodal Cholesky + AMD), envelope (own Jennings profile Cholesky), ldl (sprs-ldl), cg (Jacobi-preconditioned conjugate gradients, no factor).
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]

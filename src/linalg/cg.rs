@@ -63,6 +63,11 @@ pub(crate) fn prepare_cg(
 }
 
 impl CgSolver {
+    /// The matrix being solved (full symmetric CSC).
+    pub(super) fn matrix(&self) -> &CsMat<f64> {
+        &self.a
+    }
+
     /// `y = A x` in parallel (rows of a symmetric CSC matrix are its columns).
     fn apply(&self, x: &[f64], y: &mut [f64]) {
         let indptr = self.a.indptr();

@@ -19,6 +19,7 @@
 
 mod bordered;
 mod cg;
+mod cg_first;
 pub mod dense;
 mod envelope;
 mod envelope_kernels;
@@ -35,6 +36,7 @@ use sprs::CsMat;
 use crate::progress::Progress;
 
 pub use bordered::solve_bordered;
+pub use cg_first::{AUTO_CG_ITERATIONS, AUTO_CG_MIN_SHIFT};
 pub use envelope::{EnvelopeFactor, envelope_size};
 
 /// A factorised SPD matrix `A` that can solve `A x = b`.
@@ -69,7 +71,9 @@ pub enum SolverKind {
     Ldl,
     /// Jacobi-preconditioned conjugate gradients; no factor, memory `O(nnz)` (`"cg"`).
     Cg,
-    /// `sparse` when its factor fits [`SolverParams::max_factor_values`], else `cg` (`"auto"`).
+    /// `sparse` when its factor fits [`SolverParams::max_factor_values`], else `cg`; on a
+    /// smoothing system (`SolverParams::diagonal_shift` ≥ [`AUTO_CG_MIN_SHIFT`]) `cg` first, with
+    /// [`AUTO_CG_ITERATIONS`] iterations before it factorises instead (`"auto"`).
     Auto,
 }
 
@@ -133,6 +137,10 @@ pub struct SolverParams {
     pub cg_tolerance: f64,
     /// Conjugate gradients: give up after this many iterations (default 5000).
     pub cg_max_iterations: usize,
+    /// The `λ` added to the matrix diagonal (smoothing), in units of the unshifted diagonal
+    /// (default 0). Informs [`SolverKind::Auto`]: from [`AUTO_CG_MIN_SHIFT`] on it runs conjugate
+    /// gradients first.
+    pub diagonal_shift: f64,
 }
 
 impl Default for SolverParams {
@@ -142,6 +150,7 @@ impl Default for SolverParams {
             max_factor_values: 400_000_000,
             cg_tolerance: 1e-10,
             cg_max_iterations: 5000,
+            diagonal_shift: 0.0,
         }
     }
 }
@@ -388,6 +397,10 @@ pub fn factorize(
             let (f, s) = cg::prepare_cg(a.clone(), params, progress)?;
             Ok((Box::new(f), s))
         }
+        SolverKind::Auto if params.diagonal_shift >= AUTO_CG_MIN_SHIFT => {
+            let (f, s) = cg_first::prepare_cg_first(a.clone(), params, progress)?;
+            Ok((Box::new(f), s))
+        }
         SolverKind::Auto => match sparse::factorize_sparse(a, params, progress) {
             Err(LinalgError::TooLarge { .. }) => {
                 let (f, s) = cg::prepare_cg(a.clone(), params, progress)?;
@@ -409,6 +422,10 @@ pub fn factorize_owned(
     validate(&a, perm)?;
     match params.kind {
         SolverKind::Cg => {}
+        SolverKind::Auto if params.diagonal_shift >= AUTO_CG_MIN_SHIFT => {
+            let (f, s) = cg_first::prepare_cg_first(a, params, progress)?;
+            return Ok((Box::new(f), s));
+        }
         SolverKind::Auto => match sparse::factorize_sparse(&a, params, progress) {
             Err(LinalgError::TooLarge { .. }) => {}
             other => return other.map(|(f, s)| (Box::new(f) as Box<dyn SpdFactor>, s)),

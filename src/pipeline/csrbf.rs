@@ -339,6 +339,7 @@ fn solve_weights(
     let solver = SolverParams {
         kind: params.solver,
         max_factor_values: budget_values,
+        diagonal_shift: params.smoothing.lambda(),
         ..Default::default()
     };
     let (factor, fstats) = factorize_owned(a, Some(perm), &solver, progress)?;
@@ -367,7 +368,7 @@ fn solve_weights(
     Ok(Solved {
         weights,
         polynomial: poly,
-        factor_values: fstats.factor_values,
+        factor_values: fstats.factor_values.max(factor.factor_values()),
         iterations,
         solver,
     })
