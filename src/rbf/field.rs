@@ -6,11 +6,10 @@
 //! Implements [`ScalarField`], including the batched [`ScalarField::values_in`] that gathers the
 //! candidate centres once per small box of grid corners.
 
-use super::carrier::NearPoints;
 use super::pou::PouBlock;
 use super::{Carrier, Kernel};
 use crate::geometry::{Aabb, Point3, dist2, sub};
-use crate::polygonize::{PerCall, RegionField, ScalarField};
+use crate::polygonize::{RegionField, ScalarField};
 use crate::spatial::SpatialIndex;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -56,7 +55,13 @@ impl SplineLevel {
 
     /// Gradient of this level's spline at `x` over `candidates` (a superset of the centres within
     /// `R` of `x`), added to `g`.
-    fn add_gradient_with(&self, kernel: Kernel, x: &Point3, candidates: &[u32], g: &mut Point3) {
+    pub(super) fn add_gradient_with(
+        &self,
+        kernel: Kernel,
+        x: &Point3,
+        candidates: &[u32],
+        g: &mut Point3,
+    ) {
         let r2 = self.support * self.support;
         let inv_r = 1.0 / self.support;
         for &i in candidates {
@@ -78,7 +83,7 @@ impl SplineLevel {
 /// (ascending ids), so a sum over them visits the centres as [`SplineLevel::value_with`] does
 /// while the squared distances vectorise.
 #[derive(Default)]
-struct CentreList {
+pub(super) struct CentreList {
     xs: Vec<f64>,
     ys: Vec<f64>,
     zs: Vec<f64>,
@@ -136,7 +141,7 @@ pub struct Spline {
 }
 
 impl Spline {
-    fn poly_value(&self, x: &Point3) -> f64 {
+    pub(super) fn poly_value(&self, x: &Point3) -> f64 {
         linear_poly(self.polynomial, x)
     }
 
@@ -149,16 +154,10 @@ impl Spline {
         v
     }
 
-    /// `U` at each of `points` (inside `region`), added to `out`; one query per level.
-    fn add_values_in(&self, kernel: Kernel, region: &Aabb, points: &[Point3], out: &mut [f64]) {
-        let lists = self.gather(region);
-        self.add_values_from(&lists, kernel, points, out, &mut Vec::new());
-    }
-
     /// Each level's centres within `R_l` of `region` (ids ascending: every point then sums its
     /// centres in the same order whatever the region, so a corner shared by two tiles or blocks
     /// gets bit-identical values).
-    fn gather(&self, region: &Aabb) -> Vec<(Vec<u32>, CentreList)> {
+    pub(super) fn gather(&self, region: &Aabb) -> Vec<(Vec<u32>, CentreList)> {
         let (c, half) = (region.center(), 0.5 * region.diagonal());
         (self.levels.iter())
             .map(|l| {
@@ -173,7 +172,7 @@ impl Spline {
     }
 
     /// `U` at each of `points` from the gathered `lists`, added to `out`.
-    fn add_values_from(
+    pub(super) fn add_values_from(
         &self,
         lists: &[(Vec<u32>, CentreList)],
         kernel: Kernel,
@@ -284,57 +283,18 @@ impl ScalarField for RbfField {
     }
 
     fn values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
-        let Correction::Blocks(blocks) = &self.correction else {
-            return self.prepare(region).values(points, out);
-        };
-        out.fill(0.0);
-        let mut sw = vec![0.0; points.len()];
-        let mut u = vec![0.0; points.len()];
-        for b in blocks.iter().filter(|b| b.outer.intersects(region)) {
-            u.fill(0.0);
-            b.spline.add_values_in(self.kernel, region, points, &mut u);
-            for (k, p) in points.iter().enumerate() {
-                let w = b.weight(p).0;
-                sw[k] += w;
-                out[k] += w * u[k];
-            }
-        }
-        for (o, w) in out.iter_mut().zip(&sw) {
-            *o = if *w > 0.0 { *o / w } else { 0.0 };
-        }
-        if let Carrier::Local(l) = &self.carrier {
-            let mut near = NearPoints::new();
-            l.gather(region, &mut near);
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o += l.value_near(p, &mut near);
-            }
-            return;
-        }
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o += self.carrier.value(p);
-        }
+        self.prepare(region).values(points, out);
     }
 
     fn gradients_in(&self, region: &Aabb, points: &[Point3], out: &mut [Point3]) {
-        if let Correction::Global(_) = &self.correction {
-            return self.prepare(region).gradients(points, out);
-        }
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o = self.gradient(p);
-        }
+        self.prepare(region).gradients(points, out);
     }
 
-    /// A global field gathers each level's centres within `R_l` of the region and the local
-    /// carrier's points ([`LocalCarrier::gather`](super::carrier::LocalCarrier::gather)) once; a
-    /// block field answers per call.
+    /// Each level's centres within `R_l` of the region (of each block meeting it) and the local
+    /// carrier's points ([`LocalCarrier::gather`](super::carrier::LocalCarrier::gather)) gathered
+    /// once per part of the region ([`super::region`]).
     fn prepare<'a>(&'a self, region: &Aabb) -> Box<dyn RegionField + 'a> {
-        let Correction::Global(spline) = &self.correction else {
-            return Box::new(PerCall {
-                field: self,
-                region: *region,
-            });
-        };
-        Box::new(GlobalInRegion::new(self, spline, region))
+        Box::new(super::region::PreparedRegion::new(self, region))
     }
 
     fn gradient(&self, x: &Point3) -> Point3 {
@@ -409,135 +369,6 @@ impl RbfField {
         samples.extend(cell.corners().iter().map(sample));
         let pos = samples.iter().filter(|v| **v > 0.0).count();
         pos != 0 && pos != samples.len() || samples.iter().any(|v| v.abs() <= half)
-    }
-}
-
-/// Most points a prepared region evaluates with per-point index queries before it gathers (the
-/// polygonizer's probe of a tile, 9 points, mostly on tiles the surface does not cross: a gather
-/// around a tile costs about as much as tens of point queries).
-const POINTS_BEFORE_GATHER: usize = 9;
-
-/// A global field prepared for one region ([`ScalarField::prepare`]): the first few points with
-/// per-point queries, then each level's centres and the local carrier's points gathered once. Both
-/// give the same values, bit for bit: each sum visits the same centres in ascending id order.
-struct GlobalInRegion<'a> {
-    field: &'a RbfField,
-    spline: &'a Spline,
-    region: Aabb,
-    /// Points evaluated with per-point queries so far.
-    single: usize,
-    /// Whether `lists` and `near` are gathered.
-    gathered: bool,
-    /// Per level: centre ids within `R_l` of the region (ascending) and their coordinates.
-    lists: Vec<(Vec<u32>, CentreList)>,
-    /// The local carrier's points near the region (`None` for an analytic carrier or before the
-    /// gather).
-    near: Option<NearPoints>,
-    hits: Vec<u32>,
-    d2: Vec<f64>,
-}
-
-impl<'a> GlobalInRegion<'a> {
-    fn new(field: &'a RbfField, spline: &'a Spline, region: &Aabb) -> Self {
-        GlobalInRegion {
-            field,
-            spline,
-            region: *region,
-            single: 0,
-            gathered: false,
-            lists: Vec::new(),
-            near: None,
-            hits: Vec::new(),
-            d2: Vec::new(),
-        }
-    }
-
-    /// Whether `n` more points are evaluated on gathered lists (gathering them if not yet).
-    fn gathered_for(&mut self, n: usize) -> bool {
-        if !self.gathered && self.single + n <= POINTS_BEFORE_GATHER {
-            self.single += n;
-            return false;
-        }
-        self.gather();
-        true
-    }
-
-    fn gather(&mut self) {
-        if self.gathered {
-            return;
-        }
-        self.gathered = true;
-        self.lists = self.spline.gather(&self.region);
-        if let Carrier::Local(l) = &self.field.carrier {
-            let mut near = NearPoints::new();
-            l.gather(&self.region, &mut near);
-            self.near = Some(near);
-        }
-    }
-
-    /// `f(x)` with per-point queries (the centres sorted as the gathered lists are).
-    fn single_value(&mut self, x: &Point3) -> f64 {
-        let f = self.field;
-        let mut v = 0.0;
-        v += self.spline.poly_value(x);
-        for l in &self.spline.levels {
-            l.index.within(x, l.support, &mut self.hits);
-            self.hits.sort_unstable();
-            v += l.value_with(f.kernel, x, &self.hits);
-        }
-        v + match &f.carrier {
-            // Outside any gathered region: a sorted radius query, as a tile's list sums.
-            Carrier::Local(l) => l.value_near(x, &mut NearPoints::new()),
-            carrier => carrier.value(x),
-        }
-    }
-}
-
-impl RegionField for GlobalInRegion<'_> {
-    fn values(&mut self, points: &[Point3], out: &mut [f64]) {
-        if !self.gathered_for(points.len()) {
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o = self.single_value(p);
-            }
-            return;
-        }
-        out.fill(0.0);
-        let f = self.field;
-        self.spline
-            .add_values_from(&self.lists, f.kernel, points, out, &mut self.d2);
-        match (&f.carrier, &mut self.near) {
-            (Carrier::Local(l), Some(near)) => {
-                for (p, o) in points.iter().zip(out.iter_mut()) {
-                    *o += l.value_near(p, near);
-                }
-            }
-            (carrier, _) => {
-                for (p, o) in points.iter().zip(out.iter_mut()) {
-                    *o += carrier.value(p);
-                }
-            }
-        }
-    }
-
-    fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
-        self.gather();
-        let f = self.field;
-        let poly = self
-            .spline
-            .polynomial
-            .map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            let g = match (&f.carrier, &mut self.near) {
-                (Carrier::Local(l), Some(near)) => l.value_gradient_near(p, near).1,
-                (carrier, _) => carrier.gradient(p),
-            };
-            *o = [0, 1, 2].map(|k| g[k] + poly[k]);
-        }
-        for (l, (hits, _)) in self.spline.levels.iter().zip(&self.lists) {
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                l.add_gradient_with(f.kernel, p, hits, o);
-            }
-        }
     }
 }
 

@@ -10,6 +10,7 @@ pub mod kernel;
 pub mod levels;
 pub mod noise;
 pub mod pou;
+mod region;
 pub mod support;
 pub mod winding;
 

@@ -192,3 +192,76 @@ fn a_prepared_tile_gives_the_batched_values_bit_for_bit() {
     }
     assert!(tiles > 40 && single > 300, "{tiles} tiles");
 }
+
+/// A region several supports wide is split into parts, each gathered on its own, and a
+/// partition-of-unity field (blocks) is prepared the same way: every point must get the bits of
+/// the per-point path (a fresh preparation answers its first points with sorted index queries),
+/// whatever part or tile it falls in, and the gradient of the plain per-point `gradient` to
+/// rounding.
+#[test]
+fn split_regions_and_block_fields_give_the_per_point_values_bit_for_bit() {
+    use rbfsurf::polygonize::ScalarField;
+    use rbfsurf::rbf::{Blocks, Correction};
+    let bunny =
+        rbfsurf::io::read_point_cloud(&common::data("bunny_cgal_10k.ply"), &Default::default())
+            .unwrap();
+    let global = fitted(&bunny);
+    let blocked = fit_field(
+        &bunny,
+        &ReconParams {
+            blocks: Blocks::MaxPoints(2500),
+            ..Default::default()
+        },
+        &NoProgress,
+        &mut Timings::default(),
+    )
+    .unwrap();
+    let field = blocked.rbf.as_ref().unwrap();
+    assert!(matches!(&field.correction, Correction::Blocks(b) if b.len() >= 4));
+    let mut compared = 0;
+    for (name, fit) in [("global", &global), ("blocks", &blocked)] {
+        let field = fit.rbf.as_ref().unwrap();
+        let r = fit.support_radius;
+        for (k, p) in bunny.points.iter().enumerate().step_by(211) {
+            // Tiles of 1, 3 and 8 supports (one part, 2³ and 4³ parts) around a data point.
+            for width in [r, 3.0 * r, 8.0 * r] {
+                let min: Point3 = [0, 1, 2].map(|a| p[a] - width * [0.45, 0.6, 0.35][a]);
+                let region = Aabb {
+                    min,
+                    max: min.map(|v| v + width),
+                };
+                let pts: Vec<Point3> = (0..60)
+                    .map(|i| {
+                        let u = [0.19, 0.43, 0.67]
+                            .map(|s: f64| ((i as f64 + 1.0) * s + k as f64 * 0.003).fract());
+                        [0, 1, 2].map(|a| min[a] + u[a] * width)
+                    })
+                    .collect();
+                let mut prepared = field.prepare(&region);
+                let mut got = vec![0.0; pts.len()];
+                prepared.values(&pts, &mut got);
+                let mut grads = vec![[0.0; 3]; pts.len()];
+                prepared.gradients(&pts, &mut grads);
+                for (i, x) in pts.iter().enumerate() {
+                    let mut single = [0.0];
+                    field.prepare(&region).values(&pts[i..=i], &mut single);
+                    assert_eq!(
+                        got[i].to_bits(),
+                        single[0].to_bits(),
+                        "{name}: value at {x:?} in a tile {width} wide"
+                    );
+                    let plain = field.gradient(x);
+                    for a in 0..3 {
+                        assert!(
+                            (plain[a] - grads[i][a]).abs() <= 1e-9 * (1.0 + plain[a].abs()),
+                            "{name}: gradient at {x:?}: {plain:?} vs {:?}",
+                            grads[i]
+                        );
+                    }
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared > 8000, "{compared}");
+}

@@ -1,0 +1,316 @@
+//! A fitted field prepared for one region of space ([`crate::polygonize::ScalarField::prepare`]:
+//! a polygonizer tile): the first few points with per-point index queries, then the centres of
+//! each level and the local carrier's points gathered once per part of the region and summed from
+//! those lists. Both give the same values, bit for bit: each sum visits the same centres in
+//! ascending id order.
+//!
+//! A gathered list holds everything within reach of any point of its box, so its length grows
+//! with the box: for a box of half diagonal `h`, the centres within `R + h` of its centre, and for
+//! the carrier's K nearest points up to `d_K + 2h`. Tiles are a fixed number of grid cells, and on
+//! dense data (10⁶ points) a cell is wider than the support radius `R`: a tile's lists then held
+//! thousands of points, each scanned at every evaluation (and sorted into shells once per
+//! tile), most of them far out of reach. So a region wider than [`PART_SUPPORTS`] finest
+//! supports is split into up to [`MAX_SPLIT`]³ parts of equal size, each gathered on the first
+//! evaluation that falls in it (parts the surface does not cross are never gathered). A point is
+//! evaluated from the lists of the part that contains it; the values do not depend on the split.
+//!
+//! A partition-of-unity field (blocks, [`super::pou`]) is prepared the same way: each block whose
+//! outer box meets the region has its own lists per part, and the blend `Σ w_b U_b / Σ w_b` is
+//! summed over those blocks in block order (a block that does not reach a point has weight 0
+//! there and adds exact zeros), so a corner shared by two tiles gets the same bits from both.
+
+use super::Carrier;
+use super::Kernel;
+use super::carrier::NearPoints;
+use super::field::{CentreList, Correction, RbfField, Spline};
+use super::pou::PouBlock;
+use crate::geometry::{Aabb, Point3};
+use crate::polygonize::RegionField;
+
+/// Most points a prepared region evaluates with per-point index queries before it gathers (the
+/// polygonizer's probe of a tile, 9 points, mostly on tiles the surface does not cross: a gather
+/// around a tile costs about as much as tens of point queries).
+const POINTS_BEFORE_GATHER: usize = 9;
+
+/// Widest part of a region, in finest support radii (or carrier radii, the smaller).
+const PART_SUPPORTS: f64 = 2.0;
+
+/// Most parts per axis.
+const MAX_SPLIT: usize = 4;
+
+/// One spline's lists: per level, the centre ids within `R_l` of a part (ascending) and their
+/// coordinates.
+type Lists = Vec<(Vec<u32>, CentreList)>;
+
+/// The lists of one part: per spline of the region (see [`PreparedRegion::splines`]); the local
+/// carrier's points near it (`None` for an analytic carrier).
+struct Gathered {
+    lists: Vec<Lists>,
+    near: Option<NearPoints>,
+}
+
+/// See the module documentation.
+pub(super) struct PreparedRegion<'a> {
+    field: &'a RbfField,
+    /// The global spline (no weight), or the blocks whose outer box meets the region, in block
+    /// order (with their weights).
+    splines: Vec<(&'a Spline, Option<&'a PouBlock>)>,
+    region: Aabb,
+    /// Points evaluated with per-point queries so far.
+    single: usize,
+    /// Whether the per-point phase is over (every later point is evaluated from the lists).
+    gathering: bool,
+    /// Parts per axis.
+    split: usize,
+    /// The parts' lists (`split³`, x fastest), gathered on first use.
+    parts: Vec<Option<Gathered>>,
+    hits: Vec<u32>,
+    d2: Vec<f64>,
+}
+
+impl<'a> PreparedRegion<'a> {
+    pub(super) fn new(field: &'a RbfField, region: &Aabb) -> Self {
+        let splines = match &field.correction {
+            Correction::Global(s) => vec![(s, None)],
+            Correction::Blocks(blocks) => (blocks.iter())
+                .filter(|b| b.outer.intersects(region))
+                .map(|b| (&b.spline, Some(b)))
+                .collect(),
+        };
+        let mut reach = field.finest_support;
+        if field.carrier_radius > 0.0 {
+            reach = reach.min(field.carrier_radius);
+        }
+        let width = region.extent().into_iter().fold(0.0f64, f64::max);
+        let split = if reach > 0.0 && width.is_finite() {
+            ((width / (PART_SUPPORTS * reach)).ceil() as usize).clamp(1, MAX_SPLIT)
+        } else {
+            1
+        };
+        PreparedRegion {
+            field,
+            splines,
+            region: *region,
+            single: 0,
+            gathering: false,
+            split,
+            parts: (0..split * split * split).map(|_| None).collect(),
+            hits: Vec::new(),
+            d2: Vec::new(),
+        }
+    }
+
+    /// Whether `n` more points are evaluated on gathered lists (else per point).
+    fn gathered_for(&mut self, n: usize) -> bool {
+        if !self.gathering && self.single + n <= POINTS_BEFORE_GATHER {
+            self.single += n;
+            return false;
+        }
+        self.gathering = true;
+        true
+    }
+
+    /// The part holding `x` (the nearest one for a point outside the region).
+    fn part_of(&self, x: &Point3) -> usize {
+        if self.split == 1 {
+            return 0;
+        }
+        let (e, s) = (self.region.extent(), self.split);
+        let axis = |k: usize| {
+            let t = if e[k] > 0.0 {
+                (x[k] - self.region.min[k]) / e[k] * s as f64
+            } else {
+                0.0
+            };
+            (t.floor().max(0.0) as usize).min(s - 1)
+        };
+        (axis(2) * s + axis(1)) * s + axis(0)
+    }
+
+    /// The box of part `k`, widened by a rounding margin so it holds every point
+    /// [`Self::part_of`] assigns to it.
+    fn part_box(&self, k: usize) -> Aabb {
+        if self.split == 1 {
+            return self.region;
+        }
+        let (e, s) = (self.region.extent(), self.split);
+        let idx = [k % s, (k / s) % s, k / (s * s)];
+        let margin = 1e-9 * e.into_iter().fold(0.0f64, f64::max);
+        let at = |a: usize, i: usize| self.region.min[a] + e[a] * i as f64 / s as f64;
+        Aabb {
+            min: [0, 1, 2].map(|a| at(a, idx[a]) - margin),
+            max: [0, 1, 2].map(|a| at(a, idx[a] + 1) + margin),
+        }
+    }
+
+    /// Gathers the lists of part `k` if not yet.
+    fn gather(&mut self, k: usize) {
+        if self.parts[k].is_some() {
+            return;
+        }
+        let bx = self.part_box(k);
+        let near = match &self.field.carrier {
+            Carrier::Local(l) => {
+                let mut near = NearPoints::new();
+                l.gather(&bx, &mut near);
+                Some(near)
+            }
+            _ => None,
+        };
+        self.parts[k] = Some(Gathered {
+            lists: self.splines.iter().map(|(s, _)| s.gather(&bx)).collect(),
+            near,
+        });
+    }
+
+    /// `f(x)` with per-point queries (the centres sorted as the gathered lists are).
+    fn single_value(&mut self, x: &Point3) -> f64 {
+        let (f, hits) = (self.field, &mut self.hits);
+        let v = blend(&self.splines, x, |s, _| {
+            let mut v = s.poly_value(x);
+            for l in &s.levels {
+                l.index.within(x, l.support, hits);
+                hits.sort_unstable();
+                v += l.value_with(f.kernel, x, hits);
+            }
+            v
+        });
+        v + match &f.carrier {
+            // Outside any gathered region: a sorted radius query, as a tile's list sums.
+            Carrier::Local(l) => l.value_near(x, &mut NearPoints::new()),
+            carrier => carrier.value(x),
+        }
+    }
+}
+
+/// The correction at `x`: the global spline's value, or the blend `Σ w_b U_b / Σ w_b` (0 where no
+/// block reaches), `value(spline, k)` giving spline `k`'s `U`.
+fn blend(
+    splines: &[(&Spline, Option<&PouBlock>)],
+    x: &Point3,
+    mut value: impl FnMut(&Spline, usize) -> f64,
+) -> f64 {
+    if let [(s, None)] = splines {
+        return value(s, 0);
+    }
+    let (mut sw, mut swu) = (0.0, 0.0);
+    for (k, (s, b)) in splines.iter().enumerate() {
+        let w = b.map_or(1.0, |b| b.weight(x).0);
+        sw += w;
+        swu += w * value(s, k);
+    }
+    if sw > 0.0 { swu / sw } else { 0.0 }
+}
+
+/// `U` of `spline` at `x` from its `lists` (poly plus each level, the arithmetic of
+/// [`Spline::add_values_from`]).
+fn spline_value(
+    spline: &Spline,
+    lists: &Lists,
+    kernel: Kernel,
+    x: &Point3,
+    d2: &mut Vec<f64>,
+) -> f64 {
+    let mut v = 0.0;
+    spline.add_values_from(
+        lists,
+        kernel,
+        std::slice::from_ref(x),
+        std::slice::from_mut(&mut v),
+        d2,
+    );
+    v
+}
+
+/// `∇U` of `spline` at `x` from its `lists`, added to `g` (the polynomial's gradient first).
+fn add_spline_gradient(spline: &Spline, lists: &Lists, kernel: Kernel, x: &Point3, g: &mut Point3) {
+    let poly = spline.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+    for k in 0..3 {
+        g[k] += poly[k];
+    }
+    for (l, (hits, _)) in spline.levels.iter().zip(lists) {
+        l.add_gradient_with(kernel, x, hits, g);
+    }
+}
+
+impl RegionField for PreparedRegion<'_> {
+    fn values(&mut self, points: &[Point3], out: &mut [f64]) {
+        if !self.gathered_for(points.len()) {
+            for (p, o) in points.iter().zip(out.iter_mut()) {
+                *o = self.single_value(p);
+            }
+            return;
+        }
+        let f = self.field;
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            let k = self.part_of(p);
+            self.gather(k);
+            let part = self.parts[k].as_mut().expect("gathered");
+            let d2 = &mut self.d2;
+            let lists = &part.lists;
+            *o = blend(&self.splines, p, |s, i| {
+                spline_value(s, &lists[i], f.kernel, p, d2)
+            });
+            *o += match (&f.carrier, &mut part.near) {
+                (Carrier::Local(l), Some(near)) => l.value_near(p, near),
+                (carrier, _) => carrier.value(p),
+            };
+        }
+    }
+
+    fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
+        self.gathering = true;
+        let f = self.field;
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            let k = self.part_of(p);
+            self.gather(k);
+            let part = self.parts[k].as_mut().expect("gathered");
+            let carrier = match (&f.carrier, &mut part.near) {
+                (Carrier::Local(l), Some(near)) => l.value_gradient_near(p, near).1,
+                (carrier, _) => carrier.gradient(p),
+            };
+            if let [(s, None)] = self.splines[..] {
+                // The carrier first, then the spline: the order of the per-point gradient.
+                *o = carrier;
+                add_spline_gradient(s, &part.lists[0], f.kernel, p, o);
+                continue;
+            }
+            let g = blended_gradient(&self.splines, &part.lists, f.kernel, p, &mut self.d2);
+            *o = [0, 1, 2].map(|a| g[a] + carrier[a]);
+        }
+    }
+}
+
+/// `∇(Σ w_b U_b / Σ w_b) = (Σ (∇w_b U_b + w_b ∇U_b) − Ū Σ ∇w_b) / Σ w_b` with `Ū` the blend
+/// (0 where no block reaches), from the blocks' lists.
+fn blended_gradient(
+    splines: &[(&Spline, Option<&PouBlock>)],
+    lists: &[Lists],
+    kernel: Kernel,
+    x: &Point3,
+    d2: &mut Vec<f64>,
+) -> Point3 {
+    let (mut sw, mut swu) = (0.0, 0.0);
+    let (mut sdw, mut sdwu, mut swdu) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+    for ((s, b), lists) in splines.iter().zip(lists) {
+        let (w, dw) = b.map_or((1.0, [0.0; 3]), |b| b.weight(x));
+        if w <= 0.0 {
+            continue;
+        }
+        let u = spline_value(s, lists, kernel, x, d2);
+        let mut du = [0.0; 3];
+        add_spline_gradient(s, lists, kernel, x, &mut du);
+        sw += w;
+        swu += w * u;
+        for k in 0..3 {
+            sdw[k] += dw[k];
+            sdwu[k] += dw[k] * u;
+            swdu[k] += w * du[k];
+        }
+    }
+    if sw <= 0.0 {
+        return [0.0; 3];
+    }
+    let ubar = swu / sw;
+    [0, 1, 2].map(|k| (sdwu[k] + swdu[k] - ubar * sdw[k]) / sw)
+}
