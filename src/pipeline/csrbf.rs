@@ -67,7 +67,10 @@ pub fn fit_field(
         support.radius,
         &index,
     )?;
-    let rhs: Vec<f64> = points.par_iter().map(|p| -carrier.value(p)).collect();
+    let rhs: Vec<f64> = carrier_values(&carrier, &points)
+        .iter()
+        .map(|v| -v)
+        .collect();
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
@@ -174,6 +177,34 @@ fn reorient_inconsistent_normals(
         crate::normals::reorient_normals(points, normals, &NormalParams::default());
     clean.normals = Some(oriented);
     flipped
+}
+
+/// Points per bucket of [`carrier_values`].
+const CARRIER_BUCKET: usize = 64;
+
+/// The carrier at every point: a local carrier's from the points gathered once per spatial bucket
+/// of about [`CARRIER_BUCKET`] points ([`crate::rbf::carrier::LocalCarrier::gather`], the
+/// polygonizer's sums: no index query per point), in parallel; an analytic one per point.
+pub(crate) fn carrier_values(carrier: &Carrier, points: &[Point3]) -> Vec<f64> {
+    let Carrier::Local(l) = carrier else {
+        return points.par_iter().map(|p| carrier.value(p)).collect();
+    };
+    let buckets = super::spatial_buckets(points, CARRIER_BUCKET);
+    let values: Vec<Vec<f64>> = buckets
+        .par_iter()
+        .map_init(crate::rbf::carrier::NearPoints::new, |near, ids| {
+            let pts: Vec<Point3> = ids.iter().map(|&i| points[i as usize]).collect();
+            l.gather(&Aabb::from_points(&pts), near);
+            pts.iter().map(|p| l.value_near(p, near)).collect()
+        })
+        .collect();
+    let mut out = vec![0.0; points.len()];
+    for (ids, v) in buckets.iter().zip(values) {
+        for (&i, v) in ids.iter().zip(v) {
+            out[i as usize] = v;
+        }
+    }
+    out
 }
 
 /// Fit the planned levels coarse to fine: level `l` interpolates `target`, what the carrier and the

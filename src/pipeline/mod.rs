@@ -408,7 +408,7 @@ pub fn residual_at(
 /// The points grouped by cubes of a grid sized so that a surface sample puts about `per` points in
 /// a cube (edge `longest · √(per / n)`); cubes in lexicographic order, points ascending within a
 /// cube (deterministic). `O(n log n)`.
-fn spatial_buckets(points: &[Point3], per: usize) -> Vec<Vec<u32>> {
+pub(crate) fn spatial_buckets(points: &[Point3], per: usize) -> Vec<Vec<u32>> {
     let bbox = Aabb::from_points(points);
     let longest = bbox.extent().iter().fold(0.0f64, |a, &b| a.max(b));
     let cell = longest * (per as f64 / points.len().max(1) as f64).sqrt();
@@ -416,10 +416,12 @@ fn spatial_buckets(points: &[Point3], per: usize) -> Vec<Vec<u32>> {
         return vec![(0..points.len() as u32).collect()];
     }
     let key = |p: &Point3| [0, 1, 2].map(|k| ((p[k] - bbox.min[k]) / cell).floor() as i64);
-    let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.sort_by_key(|&i| (key(&points[i as usize]), i));
-    order
-        .chunk_by(|&a, &b| key(&points[a as usize]) == key(&points[b as usize]))
-        .map(<[u32]>::to_vec)
+    let mut keyed: Vec<([i64; 3], u32)> = (points.par_iter().enumerate())
+        .map(|(i, p)| (key(p), i as u32))
+        .collect();
+    keyed.par_sort_unstable();
+    keyed
+        .chunk_by(|a, b| a.0 == b.0)
+        .map(|c| c.iter().map(|&(_, i)| i).collect())
         .collect()
 }

@@ -281,10 +281,9 @@ pub(crate) fn fit_block(
         .collect();
     drop(index);
     let pts: Vec<Point3> = members.iter().map(|&i| set.points[i]).collect();
-    let rhs: Vec<f64> = {
-        use rayon::prelude::*;
-        pts.par_iter().map(|p| -carrier.value(p)).collect()
-    };
+    let rhs: Vec<f64> = (super::super::csrbf::carrier_values(&carrier, &pts).iter())
+        .map(|v| -v)
+        .collect();
     drop(carrier);
     super::super::check_cancel(progress)?;
     let mut timings = Timings::default();
