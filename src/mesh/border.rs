@@ -10,6 +10,7 @@
 
 use super::topology::UnionFind;
 use crate::geometry::TriMesh;
+use rayon::prelude::*;
 
 /// Passes before giving up (each removes at least one triangle; real borders settle in 2–4).
 const MAX_PASSES: usize = 32;
@@ -41,7 +42,7 @@ fn crowded_edges(triangles: &[[u32; 3]]) -> (Vec<bool>, Vec<u32>) {
             half.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), ti as u32));
         }
     }
-    half.sort_unstable();
+    half.par_sort_unstable();
     let mut drop = vec![false; triangles.len()];
     let mut uf = UnionFind::new(triangles.len());
     for (i, &(edge, ti)) in half.iter().enumerate() {
@@ -84,13 +85,26 @@ fn flag_extra_fans(triangles: &[[u32; 3]], n: usize, piece: &[u32], drop: &mut [
             }
         }
     }
-    let mut group = Vec::new();
-    for v in 0..n {
-        let fan = &incident[start[v] as usize..start[v + 1] as usize];
-        if fan.len() > 1 {
-            fan_groups(triangles, v as u32, fan, &mut group);
-            flag_all_but_one(fan, &group, piece, drop);
-        }
+    // The vertices' decisions read only their fans (not `drop`): in parallel, then applied.
+    let flagged: Vec<u32> = (0..n)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(group, out), v| {
+                out.clear();
+                let fan = &incident[start[v] as usize..start[v + 1] as usize];
+                if fan.len() > 1 {
+                    fan_groups(triangles, v as u32, fan, group);
+                    all_but_one(fan, group, piece, out);
+                }
+                out.clone()
+            },
+        )
+        .flatten_iter()
+        .collect();
+    for t in flagged {
+        drop[t as usize] = true;
     }
 }
 
@@ -124,9 +138,9 @@ fn fan_groups(triangles: &[[u32; 3]], v: u32, fan: &[u32], group: &mut Vec<usize
     }
 }
 
-/// Flags the triangles of every group but the one on the largest piece (ties: the larger group,
-/// then the group listed first).
-fn flag_all_but_one(fan: &[u32], group: &[usize], piece: &[u32], drop: &mut [bool]) {
+/// Pushes to `out` the triangles of every group but the one on the largest piece (ties: the larger
+/// group, then the group listed first).
+fn all_but_one(fan: &[u32], group: &[usize], piece: &[u32], out: &mut Vec<u32>) {
     // (piece size, fan size) per group, indexed by the group's first local index.
     let mut key = vec![(0u32, 0usize); fan.len()];
     for (i, &g) in group.iter().enumerate() {
@@ -139,7 +153,7 @@ fn flag_all_but_one(fan: &[u32], group: &[usize], piece: &[u32], drop: &mut [boo
     let best = (0..key.len()).fold(0, |b, g| if key[g] > key[b] { g } else { b });
     for (i, &g) in group.iter().enumerate() {
         if g != best {
-            drop[fan[i] as usize] = true;
+            out.push(fan[i]);
         }
     }
 }

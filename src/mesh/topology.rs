@@ -71,6 +71,14 @@ impl UnionFind {
         }
     }
 
+    /// `n` singletons again, reusing the storage.
+    fn reset(&mut self, n: usize) {
+        self.parent.clear();
+        self.parent.extend(0..n as u32);
+        self.size.clear();
+        self.size.resize(n, 1);
+    }
+
     pub(crate) fn find(&mut self, mut x: u32) -> u32 {
         while self.parent[x as usize] != x {
             let grand = self.parent[self.parent[x as usize] as usize];
@@ -189,34 +197,35 @@ fn count_non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> usize {
             fill[v as usize] += 1;
         }
     }
-    let mut bad = 0;
-    let mut spokes: Vec<(u32, u32)> = Vec::new();
-    for v in 0..n {
-        let fan = &incident[start[v] as usize..start[v + 1] as usize];
-        if fan.len() <= 1 {
-            continue;
-        }
-        spokes.clear();
-        for (local, &ti) in fan.iter().enumerate() {
-            for &w in &triangles[ti as usize] {
-                if w as usize != v {
-                    spokes.push((w, local as u32));
+    // Vertices in parallel, each thread with its own scratch (the fans are independent).
+    let scratch = || (Vec::<(u32, u32)>::new(), UnionFind::new(0));
+    (0..n)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map_init(scratch, |(spokes, uf), v| {
+            let fan = &incident[start[v] as usize..start[v + 1] as usize];
+            if fan.len() <= 1 {
+                return 0;
+            }
+            spokes.clear();
+            for (local, &ti) in fan.iter().enumerate() {
+                for &w in &triangles[ti as usize] {
+                    if w as usize != v {
+                        spokes.push((w, local as u32));
+                    }
                 }
             }
-        }
-        spokes.sort_unstable();
-        let mut uf = UnionFind::new(fan.len());
-        for pair in spokes.windows(2) {
-            if pair[0].0 == pair[1].0 {
-                uf.union(pair[0].1, pair[1].1);
+            spokes.sort_unstable();
+            uf.reset(fan.len());
+            for pair in spokes.windows(2) {
+                if pair[0].0 == pair[1].0 {
+                    uf.union(pair[0].1, pair[1].1);
+                }
             }
-        }
-        let root = uf.find(0);
-        if (1..fan.len() as u32).any(|i| uf.find(i) != root) {
-            bad += 1;
-        }
-    }
-    bad
+            let root = uf.find(0);
+            usize::from((1..fan.len() as u32).any(|i| uf.find(i) != root))
+        })
+        .sum()
 }
 
 /// Computes the topological summary of `mesh` (indices only; positions and normals are not read).
