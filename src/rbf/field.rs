@@ -306,7 +306,11 @@ impl ScalarField for RbfField {
         };
         let gu = match &self.correction {
             Correction::Global(s) => s.value_gradient(self.kernel, x, &mut hits).1,
-            Correction::Blocks(blocks) => blended_gradient(blocks, self.kernel, x, &mut hits),
+            Correction::Blocks(blocks) => blended_gradient(
+                blocks.len(),
+                |b| blocks[b].weight(x),
+                |b| blocks[b].spline.value_gradient(self.kernel, x, &mut hits),
+            ),
         };
         for k in 0..3 {
             g[k] += gu[k];
@@ -372,21 +376,22 @@ impl RbfField {
     }
 }
 
-/// `∇(Σ w_b U_b / Σ w_b) = (Σ (∇w_b U_b + w_b ∇U_b) − Ū Σ ∇w_b) / Σ w_b` with `Ū` the blend.
-fn blended_gradient(
-    blocks: &[PouBlock],
-    kernel: Kernel,
-    x: &Point3,
-    hits: &mut Vec<u32>,
+/// `∇(Σ w_b U_b / Σ w_b) = (Σ (∇w_b U_b + w_b ∇U_b) − Ū Σ ∇w_b) / Σ w_b` with `Ū` the blend, over
+/// `n` blocks: `weight(b)` gives `(w_b, ∇w_b)`, `value_gradient(b)` gives `(U_b, ∇U_b)` (asked
+/// only where `w_b > 0`); 0 where no block reaches.
+pub(super) fn blended_gradient(
+    n: usize,
+    weight: impl Fn(usize) -> (f64, Point3),
+    mut value_gradient: impl FnMut(usize) -> (f64, Point3),
 ) -> Point3 {
     let (mut sw, mut swu) = (0.0, 0.0);
     let (mut sdw, mut sdwu, mut swdu) = ([0.0; 3], [0.0; 3], [0.0; 3]);
-    for b in blocks {
-        let (w, dw) = b.weight(x);
+    for b in 0..n {
+        let (w, dw) = weight(b);
         if w <= 0.0 {
             continue;
         }
-        let (u, du) = b.spline.value_gradient(kernel, x, hits);
+        let (u, du) = value_gradient(b);
         sw += w;
         swu += w * u;
         for k in 0..3 {

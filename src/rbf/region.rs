@@ -22,7 +22,7 @@
 use super::Carrier;
 use super::Kernel;
 use super::carrier::NearPoints;
-use super::field::{CentreList, Correction, RbfField, Spline};
+use super::field::{CentreList, Correction, RbfField, Spline, blended_gradient};
 use super::pou::PouBlock;
 use crate::geometry::{Aabb, Point3};
 use crate::polygonize::RegionField;
@@ -275,42 +275,18 @@ impl RegionField for PreparedRegion<'_> {
                 add_spline_gradient(s, &part.lists[0], f.kernel, p, o);
                 continue;
             }
-            let g = blended_gradient(&self.splines, &part.lists, f.kernel, p, &mut self.d2);
+            let (splines, lists, d2) = (&self.splines, &part.lists, &mut self.d2);
+            let g = blended_gradient(
+                splines.len(),
+                |b| splines[b].1.map_or((1.0, [0.0; 3]), |blk| blk.weight(p)),
+                |b| {
+                    let u = spline_value(splines[b].0, &lists[b], f.kernel, p, d2);
+                    let mut du = [0.0; 3];
+                    add_spline_gradient(splines[b].0, &lists[b], f.kernel, p, &mut du);
+                    (u, du)
+                },
+            );
             *o = [0, 1, 2].map(|a| g[a] + carrier[a]);
         }
     }
-}
-
-/// `∇(Σ w_b U_b / Σ w_b) = (Σ (∇w_b U_b + w_b ∇U_b) − Ū Σ ∇w_b) / Σ w_b` with `Ū` the blend
-/// (0 where no block reaches), from the blocks' lists.
-fn blended_gradient(
-    splines: &[(&Spline, Option<&PouBlock>)],
-    lists: &[Lists],
-    kernel: Kernel,
-    x: &Point3,
-    d2: &mut Vec<f64>,
-) -> Point3 {
-    let (mut sw, mut swu) = (0.0, 0.0);
-    let (mut sdw, mut sdwu, mut swdu) = ([0.0; 3], [0.0; 3], [0.0; 3]);
-    for ((s, b), lists) in splines.iter().zip(lists) {
-        let (w, dw) = b.map_or((1.0, [0.0; 3]), |b| b.weight(x));
-        if w <= 0.0 {
-            continue;
-        }
-        let u = spline_value(s, lists, kernel, x, d2);
-        let mut du = [0.0; 3];
-        add_spline_gradient(s, lists, kernel, x, &mut du);
-        sw += w;
-        swu += w * u;
-        for k in 0..3 {
-            sdw[k] += dw[k];
-            sdwu[k] += dw[k] * u;
-            swdu[k] += w * du[k];
-        }
-    }
-    if sw <= 0.0 {
-        return [0.0; 3];
-    }
-    let ubar = swu / sw;
-    [0, 1, 2].map(|k| (sdwu[k] + swdu[k] - ubar * sdw[k]) / sw)
 }
