@@ -89,18 +89,15 @@ fn flag_extra_fans(triangles: &[[u32; 3]], n: usize, piece: &[u32], drop: &mut [
     let flagged: Vec<u32> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
-        .map_init(
-            || (Vec::new(), Vec::new()),
-            |(group, out), v| {
-                out.clear();
-                let fan = &incident[start[v] as usize..start[v + 1] as usize];
-                if fan.len() > 1 {
-                    fan_groups(triangles, v as u32, fan, group);
-                    all_but_one(fan, group, piece, out);
-                }
-                out.clone()
-            },
-        )
+        .map_init(Vec::new, |group, v| {
+            let mut out = Vec::new();
+            let fan = &incident[start[v] as usize..start[v + 1] as usize];
+            if fan.len() > 1 {
+                fan_groups(triangles, v as u32, fan, group);
+                all_but_one(fan, group, piece, &mut out);
+            }
+            out
+        })
         .flatten_iter()
         .collect();
     for t in flagged {

@@ -189,22 +189,11 @@ pub(crate) fn carrier_values(carrier: &Carrier, points: &[Point3]) -> Vec<f64> {
     let Carrier::Local(l) = carrier else {
         return points.par_iter().map(|p| carrier.value(p)).collect();
     };
-    let buckets = super::spatial_buckets(points, CARRIER_BUCKET);
-    let values: Vec<Vec<f64>> = buckets
-        .par_iter()
-        .map_init(crate::rbf::carrier::NearPoints::new, |near, ids| {
-            let pts: Vec<Point3> = ids.iter().map(|&i| points[i as usize]).collect();
-            l.gather(&Aabb::from_points(&pts), near);
-            pts.iter().map(|p| l.value_near(p, near)).collect()
-        })
-        .collect();
-    let mut out = vec![0.0; points.len()];
-    for (ids, v) in buckets.iter().zip(values) {
-        for (&i, v) in ids.iter().zip(v) {
-            out[i as usize] = v;
-        }
-    }
-    out
+    super::per_bucket(points, CARRIER_BUCKET, |pts| {
+        let mut near = crate::rbf::carrier::NearPoints::new();
+        l.gather(&Aabb::from_points(pts), &mut near);
+        pts.iter().map(|p| l.value_near(p, &mut near)).collect()
+    })
 }
 
 /// Fit the planned levels coarse to fine: level `l` interpolates `target`, what the carrier and the

@@ -379,24 +379,16 @@ pub fn residual_at(
     points: &[Point3],
     progress: &dyn Progress,
 ) -> Result<ResidualReport, ReconError> {
-    let buckets = spatial_buckets(points, RESIDUAL_BUCKET);
-    let r: Vec<Option<Vec<f64>>> = buckets
-        .par_iter()
-        .map(|ids| {
-            (!progress.cancelled()).then(|| {
-                let pts: Vec<Point3> = ids.iter().map(|&i| points[i as usize]).collect();
-                let mut out = vec![0.0; pts.len()];
-                field.values_in(&Aabb::from_points(&pts), &pts, &mut out);
-                out
-            })
-        })
-        .collect();
-    check_cancel(progress)?;
-    let mut abs = vec![0.0f64; points.len()];
-    for (ids, values) in buckets.iter().zip(r.into_iter().flatten()) {
-        for (&i, v) in ids.iter().zip(values) {
-            abs[i as usize] = v.abs();
+    let mut abs = per_bucket(points, RESIDUAL_BUCKET, |pts| {
+        let mut out = vec![0.0; pts.len()];
+        if !progress.cancelled() {
+            field.values_in(&Aabb::from_points(pts), pts, &mut out);
         }
+        out
+    });
+    check_cancel(progress)?;
+    for v in &mut abs {
+        *v = v.abs();
     }
     let sum2: f64 = abs.iter().map(|v| v * v).sum();
     Ok(ResidualReport {
@@ -405,10 +397,30 @@ pub fn residual_at(
     })
 }
 
+/// `eval` of each bucket of about `per` nearby points ([`spatial_buckets`]), in parallel, as one
+/// value per point in the input order: for evaluations that gather their data once per small box.
+pub(crate) fn per_bucket(
+    points: &[Point3],
+    per: usize,
+    eval: impl Fn(&[Point3]) -> Vec<f64> + Sync,
+) -> Vec<f64> {
+    let buckets = spatial_buckets(points, per);
+    let values: Vec<Vec<f64>> = (buckets.par_iter())
+        .map(|ids| eval(&ids.iter().map(|&i| points[i as usize]).collect::<Vec<_>>()))
+        .collect();
+    let mut out = vec![0.0; points.len()];
+    for (ids, v) in buckets.iter().zip(values) {
+        for (&i, v) in ids.iter().zip(v) {
+            out[i as usize] = v;
+        }
+    }
+    out
+}
+
 /// The points grouped by cubes of a grid sized so that a surface sample puts about `per` points in
 /// a cube (edge `longest · √(per / n)`); cubes in lexicographic order, points ascending within a
 /// cube (deterministic). `O(n log n)`.
-pub(crate) fn spatial_buckets(points: &[Point3], per: usize) -> Vec<Vec<u32>> {
+fn spatial_buckets(points: &[Point3], per: usize) -> Vec<Vec<u32>> {
     let bbox = Aabb::from_points(points);
     let longest = bbox.extent().iter().fold(0.0f64, |a, &b| a.max(b));
     let cell = longest * (per as f64 / points.len().max(1) as f64).sqrt();

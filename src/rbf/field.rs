@@ -55,13 +55,7 @@ impl SplineLevel {
 
     /// Gradient of this level's spline at `x` over `candidates` (a superset of the centres within
     /// `R` of `x`), added to `g`.
-    pub(super) fn add_gradient_with(
-        &self,
-        kernel: Kernel,
-        x: &Point3,
-        candidates: &[u32],
-        g: &mut Point3,
-    ) {
+    fn add_gradient_with(&self, kernel: Kernel, x: &Point3, candidates: &[u32], g: &mut Point3) {
         let r2 = self.support * self.support;
         let inv_r = 1.0 / self.support;
         for &i in candidates {
@@ -171,22 +165,36 @@ impl Spline {
             .collect()
     }
 
-    /// `U` at each of `points` from the gathered `lists`, added to `out`.
-    pub(super) fn add_values_from(
+    /// `U(x)` from the gathered `lists` (the polynomial, then each level's sum over its list).
+    pub(super) fn value_from(
         &self,
         lists: &[(Vec<u32>, CentreList)],
         kernel: Kernel,
-        points: &[Point3],
-        out: &mut [f64],
+        x: &Point3,
         d2: &mut Vec<f64>,
-    ) {
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o += self.poly_value(p);
-        }
+    ) -> f64 {
+        let mut v = 0.0;
+        v += self.poly_value(x);
         for (l, (_, list)) in self.levels.iter().zip(lists) {
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o += list.value(kernel, l.support, p, d2);
-            }
+            v += list.value(kernel, l.support, x, d2);
+        }
+        v
+    }
+
+    /// `∇U(x)` from the gathered `lists`, added to `g` (the polynomial's gradient first).
+    pub(super) fn add_gradient_from(
+        &self,
+        lists: &[(Vec<u32>, CentreList)],
+        kernel: Kernel,
+        x: &Point3,
+        g: &mut Point3,
+    ) {
+        let poly = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        for k in 0..3 {
+            g[k] += poly[k];
+        }
+        for (l, (hits, _)) in self.levels.iter().zip(lists) {
+            l.add_gradient_with(kernel, x, hits, g);
         }
     }
 

@@ -20,7 +20,6 @@
 //! there and adds exact zeros), so a corner shared by two tiles gets the same bits from both.
 
 use super::Carrier;
-use super::Kernel;
 use super::carrier::NearPoints;
 use super::field::{CentreList, Correction, RbfField, Spline, blended_gradient};
 use super::pou::PouBlock;
@@ -202,37 +201,6 @@ fn blend(
     if sw > 0.0 { swu / sw } else { 0.0 }
 }
 
-/// `U` of `spline` at `x` from its `lists` (poly plus each level, the arithmetic of
-/// [`Spline::add_values_from`]).
-fn spline_value(
-    spline: &Spline,
-    lists: &Lists,
-    kernel: Kernel,
-    x: &Point3,
-    d2: &mut Vec<f64>,
-) -> f64 {
-    let mut v = 0.0;
-    spline.add_values_from(
-        lists,
-        kernel,
-        std::slice::from_ref(x),
-        std::slice::from_mut(&mut v),
-        d2,
-    );
-    v
-}
-
-/// `∇U` of `spline` at `x` from its `lists`, added to `g` (the polynomial's gradient first).
-fn add_spline_gradient(spline: &Spline, lists: &Lists, kernel: Kernel, x: &Point3, g: &mut Point3) {
-    let poly = spline.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
-    for k in 0..3 {
-        g[k] += poly[k];
-    }
-    for (l, (hits, _)) in spline.levels.iter().zip(lists) {
-        l.add_gradient_with(kernel, x, hits, g);
-    }
-}
-
 impl RegionField for PreparedRegion<'_> {
     fn values(&mut self, points: &[Point3], out: &mut [f64]) {
         if !self.gathered_for(points.len()) {
@@ -249,7 +217,7 @@ impl RegionField for PreparedRegion<'_> {
             let d2 = &mut self.d2;
             let lists = &part.lists;
             *o = blend(&self.splines, p, |s, i| {
-                spline_value(s, &lists[i], f.kernel, p, d2)
+                s.value_from(&lists[i], f.kernel, p, d2)
             });
             *o += match (&f.carrier, &mut part.near) {
                 (Carrier::Local(l), Some(near)) => l.value_near(p, near),
@@ -272,7 +240,7 @@ impl RegionField for PreparedRegion<'_> {
             if let [(s, None)] = self.splines[..] {
                 // The carrier first, then the spline: the order of the per-point gradient.
                 *o = carrier;
-                add_spline_gradient(s, &part.lists[0], f.kernel, p, o);
+                s.add_gradient_from(&part.lists[0], f.kernel, p, o);
                 continue;
             }
             let (splines, lists, d2) = (&self.splines, &part.lists, &mut self.d2);
@@ -280,9 +248,11 @@ impl RegionField for PreparedRegion<'_> {
                 splines.len(),
                 |b| splines[b].1.map_or((1.0, [0.0; 3]), |blk| blk.weight(p)),
                 |b| {
-                    let u = spline_value(splines[b].0, &lists[b], f.kernel, p, d2);
+                    let u = splines[b].0.value_from(&lists[b], f.kernel, p, d2);
                     let mut du = [0.0; 3];
-                    add_spline_gradient(splines[b].0, &lists[b], f.kernel, p, &mut du);
+                    splines[b]
+                        .0
+                        .add_gradient_from(&lists[b], f.kernel, p, &mut du);
                     (u, du)
                 },
             );
