@@ -198,6 +198,38 @@ impl Spline {
         }
     }
 
+    /// [`Self::add_gradient_from`] with a sorted index query per level instead of gathered
+    /// lists (the same sums in the same order, bit for bit).
+    pub(super) fn add_gradient_sorted(
+        &self,
+        kernel: Kernel,
+        x: &Point3,
+        hits: &mut Vec<u32>,
+        g: &mut Point3,
+    ) {
+        let poly = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        for k in 0..3 {
+            g[k] += poly[k];
+        }
+        for l in &self.levels {
+            l.index.within(x, l.support, hits);
+            hits.sort_unstable();
+            l.add_gradient_with(kernel, x, hits, g);
+        }
+    }
+
+    /// [`Self::value_from`] with a sorted index query per level instead of gathered lists (the
+    /// same sums in the same order, bit for bit).
+    pub(super) fn value_sorted(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>) -> f64 {
+        let mut v = self.poly_value(x);
+        for l in &self.levels {
+            l.index.within(x, l.support, hits);
+            hits.sort_unstable();
+            v += l.value_with(kernel, x, hits);
+        }
+        v
+    }
+
     /// `(U(x), ∇U(x))`.
     fn value_gradient(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>) -> (f64, Point3) {
         let mut g = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);

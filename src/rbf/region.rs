@@ -1,8 +1,8 @@
 //! A fitted field prepared for one region of space ([`crate::polygonize::ScalarField::prepare`]:
-//! a polygonizer tile): the first few points with per-point index queries, then the centres of
-//! each level and the local carrier's points gathered once per part of the region and summed from
-//! those lists. Both give the same values, bit for bit: each sum visits the same centres in
-//! ascending id order.
+//! a polygonizer tile): the region is cut into parts; the first few points of each part are
+//! evaluated with per-point index queries, later ones from the centres of each level and the local
+//! carrier's points gathered once for the part. Both give the same values and gradients, bit for
+//! bit: each sum visits the same centres in ascending id order.
 //!
 //! A gathered list holds everything within reach of any point of its box, so its length grows
 //! with the box: for a box of half diagonal `h`, the centres within `R + h` of its centre, and for
@@ -10,9 +10,10 @@
 //! dense data (10⁶ points) a cell is wider than the support radius `R`: a tile's lists then held
 //! thousands of points, each scanned at every evaluation (and sorted into shells once per
 //! tile), most of them far out of reach. So a region wider than [`PART_SUPPORTS`] finest
-//! supports is split into up to [`MAX_SPLIT`]³ parts of equal size, each gathered on the first
-//! evaluation that falls in it (parts the surface does not cross are never gathered). A point is
-//! evaluated from the lists of the part that contains it; the values do not depend on the split.
+//! supports is split into up to [`MAX_SPLIT`]³ parts of equal size, each gathered once
+//! [`POINTS_BEFORE_GATHER`] points fell in it (parts with fewer, e.g. the few grid corners of a
+//! part on 10⁶ points, are never gathered). A point is evaluated from the lists of the part that
+//! contains it; the values do not depend on the split.
 //!
 //! A partition-of-unity field (blocks, [`super::pou`]) is prepared the same way: each block whose
 //! outer box meets the region has its own lists per part, and the blend `Σ w_b U_b / Σ w_b` is
@@ -26,10 +27,12 @@ use super::pou::PouBlock;
 use crate::geometry::{Aabb, Point3};
 use crate::polygonize::RegionField;
 
-/// Most points a prepared region evaluates with per-point index queries before it gathers (the
-/// polygonizer's probe of a tile, 9 points, mostly on tiles the surface does not cross: a gather
-/// around a tile costs about as much as tens of point queries).
-const POINTS_BEFORE_GATHER: usize = 9;
+/// Most points a part of a prepared region evaluates with per-point index queries before it
+/// gathers its lists: a gather costs about as much as this many point queries (the polygonizer's
+/// probe of a tile, 9 points, mostly on tiles the surface does not cross; on 10⁶ points, where a
+/// grid cell is wider than the support radius, a part holds only a few grid corners and gathering
+/// every part cost a third more than querying per point).
+const POINTS_BEFORE_GATHER: u8 = 9;
 
 /// Widest part of a region, in finest support radii (or carrier radii, the smaller).
 const PART_SUPPORTS: f64 = 2.0;
@@ -55,10 +58,8 @@ pub(super) struct PreparedRegion<'a> {
     /// order (with their weights).
     splines: Vec<(&'a Spline, Option<&'a PouBlock>)>,
     region: Aabb,
-    /// Points evaluated with per-point queries so far.
-    single: usize,
-    /// Whether the per-point phase is over (every later point is evaluated from the lists).
-    gathering: bool,
+    /// Points of each part evaluated with per-point queries so far.
+    single: Vec<u8>,
     /// Parts per axis.
     split: usize,
     /// The parts' lists (`split³`, x fastest), gathered on first use.
@@ -90,8 +91,7 @@ impl<'a> PreparedRegion<'a> {
             field,
             splines,
             region: *region,
-            single: 0,
-            gathering: false,
+            single: vec![0; split * split * split],
             split,
             parts: (0..split * split * split).map(|_| None).collect(),
             hits: Vec::new(),
@@ -99,14 +99,16 @@ impl<'a> PreparedRegion<'a> {
         }
     }
 
-    /// Whether `n` more points are evaluated on gathered lists (else per point).
-    fn gathered_for(&mut self, n: usize) -> bool {
-        if !self.gathering && self.single + n <= POINTS_BEFORE_GATHER {
-            self.single += n;
-            return false;
+    /// The part holding `x`, its lists gathered, or `None` while it evaluates per point (its
+    /// first [`POINTS_BEFORE_GATHER`] points).
+    fn gathered_part(&mut self, x: &Point3) -> Option<usize> {
+        let k = self.part_of(x);
+        if self.parts[k].is_none() && self.single[k] < POINTS_BEFORE_GATHER {
+            self.single[k] += 1;
+            return None;
         }
-        self.gathering = true;
-        true
+        self.gather(k);
+        Some(k)
     }
 
     /// The part holding `x` (the nearest one for a point outside the region).
@@ -180,6 +182,32 @@ impl<'a> PreparedRegion<'a> {
             carrier => carrier.value(x),
         }
     }
+
+    /// `∇f(x)` with per-point queries (the sums of [`RegionField::gradients`], same order).
+    fn single_gradient(&mut self, x: &Point3) -> Point3 {
+        let (f, hits) = (self.field, &mut self.hits);
+        let carrier = match &f.carrier {
+            Carrier::Local(l) => l.value_gradient_near(x, &mut NearPoints::new()).1,
+            carrier => carrier.gradient(x),
+        };
+        if let [(s, None)] = self.splines[..] {
+            let mut o = carrier;
+            s.add_gradient_sorted(f.kernel, x, hits, &mut o);
+            return o;
+        }
+        let splines = &self.splines;
+        let g = blended_gradient(
+            splines.len(),
+            |b| splines[b].1.map_or((1.0, [0.0; 3]), |blk| blk.weight(x)),
+            |b| {
+                let u = splines[b].0.value_sorted(f.kernel, x, hits);
+                let mut du = [0.0; 3];
+                splines[b].0.add_gradient_sorted(f.kernel, x, hits, &mut du);
+                (u, du)
+            },
+        );
+        [0, 1, 2].map(|a| g[a] + carrier[a])
+    }
 }
 
 /// The correction at `x`: the global spline's value, or the blend `Σ w_b U_b / Σ w_b` (0 where no
@@ -203,16 +231,12 @@ fn blend(
 
 impl RegionField for PreparedRegion<'_> {
     fn values(&mut self, points: &[Point3], out: &mut [f64]) {
-        if !self.gathered_for(points.len()) {
-            for (p, o) in points.iter().zip(out.iter_mut()) {
-                *o = self.single_value(p);
-            }
-            return;
-        }
         let f = self.field;
         for (p, o) in points.iter().zip(out.iter_mut()) {
-            let k = self.part_of(p);
-            self.gather(k);
+            let Some(k) = self.gathered_part(p) else {
+                *o = self.single_value(p);
+                continue;
+            };
             let part = self.parts[k].as_mut().expect("gathered");
             let d2 = &mut self.d2;
             let lists = &part.lists;
@@ -227,11 +251,12 @@ impl RegionField for PreparedRegion<'_> {
     }
 
     fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
-        self.gathering = true;
         let f = self.field;
         for (p, o) in points.iter().zip(out.iter_mut()) {
-            let k = self.part_of(p);
-            self.gather(k);
+            let Some(k) = self.gathered_part(p) else {
+                *o = self.single_gradient(p);
+                continue;
+            };
             let part = self.parts[k].as_mut().expect("gathered");
             let carrier = match (&f.carrier, &mut part.near) {
                 (Carrier::Local(l), Some(near)) => l.value_gradient_near(p, near).1,

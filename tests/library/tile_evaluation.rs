@@ -195,9 +195,9 @@ fn a_prepared_tile_gives_the_batched_values_bit_for_bit() {
 
 /// A region several supports wide is split into parts, each gathered on its own, and a
 /// partition-of-unity field (blocks) is prepared the same way: every point must get the bits of
-/// the per-point path (a fresh preparation answers its first points with sorted index queries),
-/// whatever part or tile it falls in, and the gradient of the plain per-point `gradient` to
-/// rounding.
+/// the per-point path (a fresh preparation answers the first points of each part with sorted
+/// index queries), whatever part or tile it falls in, values and gradients, and the gradient of
+/// the plain per-point `gradient` to rounding.
 #[test]
 fn split_regions_and_block_fields_give_the_per_point_values_bit_for_bit() {
     use rbfsurf::polygonize::ScalarField;
@@ -223,14 +223,15 @@ fn split_regions_and_block_fields_give_the_per_point_values_bit_for_bit() {
         let field = fit.rbf.as_ref().unwrap();
         let r = fit.support_radius;
         for (k, p) in bunny.points.iter().enumerate().step_by(211) {
-            // Tiles of 1, 3 and 8 supports (one part, 2³ and 4³ parts) around a data point.
-            for width in [r, 3.0 * r, 8.0 * r] {
+            // Tiles of 1, 3 and 8 supports (one part, 2³ and 4³ parts) around a data point,
+            // with enough points that most parts gather their lists.
+            for (width, count) in [(r, 60), (3.0 * r, 150), (8.0 * r, 1000)] {
                 let min: Point3 = [0, 1, 2].map(|a| p[a] - width * [0.45, 0.6, 0.35][a]);
                 let region = Aabb {
                     min,
                     max: min.map(|v| v + width),
                 };
-                let pts: Vec<Point3> = (0..60)
+                let pts: Vec<Point3> = (0..count)
                     .map(|i| {
                         let u = [0.19, 0.43, 0.67]
                             .map(|s: f64| ((i as f64 + 1.0) * s + k as f64 * 0.003).fract());
@@ -249,6 +250,13 @@ fn split_regions_and_block_fields_give_the_per_point_values_bit_for_bit() {
                         got[i].to_bits(),
                         single[0].to_bits(),
                         "{name}: value at {x:?} in a tile {width} wide"
+                    );
+                    let mut single_gradient = [[0.0; 3]];
+                    (field.prepare(&region)).gradients(&pts[i..=i], &mut single_gradient);
+                    assert_eq!(
+                        grads[i].map(f64::to_bits),
+                        single_gradient[0].map(f64::to_bits),
+                        "{name}: gradient at {x:?} in a tile {width} wide"
                     );
                     let plain = field.gradient(x);
                     for a in 0..3 {
