@@ -111,6 +111,24 @@ impl<'a> PreparedRegion<'a> {
         Some(k)
     }
 
+    /// Gathers at once the lists of every part that `points` would take past
+    /// [`POINTS_BEFORE_GATHER`] (a batch of a residual bucket's data points or of a dense tile's
+    /// corners), instead of evaluating its first points one by one.
+    fn gather_busy_parts(&mut self, points: &[Point3]) {
+        if points.len() <= usize::from(POINTS_BEFORE_GATHER) {
+            return;
+        }
+        let mut count = vec![0usize; self.parts.len()];
+        for p in points {
+            count[self.part_of(p)] += 1;
+        }
+        for (k, n) in count.into_iter().enumerate() {
+            if n + usize::from(self.single[k]) > usize::from(POINTS_BEFORE_GATHER) {
+                self.gather(k);
+            }
+        }
+    }
+
     /// The part holding `x` (the nearest one for a point outside the region).
     fn part_of(&self, x: &Point3) -> usize {
         if self.split == 1 {
@@ -231,6 +249,7 @@ fn blend(
 
 impl RegionField for PreparedRegion<'_> {
     fn values(&mut self, points: &[Point3], out: &mut [f64]) {
+        self.gather_busy_parts(points);
         let f = self.field;
         for (p, o) in points.iter().zip(out.iter_mut()) {
             let Some(k) = self.gathered_part(p) else {
@@ -251,6 +270,7 @@ impl RegionField for PreparedRegion<'_> {
     }
 
     fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
+        self.gather_busy_parts(points);
         let f = self.field;
         for (p, o) in points.iter().zip(out.iter_mut()) {
             let Some(k) = self.gathered_part(p) else {
