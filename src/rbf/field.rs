@@ -139,6 +139,11 @@ impl Spline {
         linear_poly(self.polynomial, x)
     }
 
+    /// `∇p` (zero without a polynomial).
+    fn poly_gradient(&self) -> Point3 {
+        self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]])
+    }
+
     /// `U(x)` over the first `upto` levels (all: `usize::MAX`).
     pub fn value(&self, kernel: Kernel, x: &Point3, upto: usize, hits: &mut Vec<u32>) -> f64 {
         let mut v = self.poly_value(x);
@@ -189,7 +194,7 @@ impl Spline {
         x: &Point3,
         g: &mut Point3,
     ) {
-        let poly = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        let poly = self.poly_gradient();
         for k in 0..3 {
             g[k] += poly[k];
         }
@@ -207,7 +212,7 @@ impl Spline {
         hits: &mut Vec<u32>,
         g: &mut Point3,
     ) {
-        let poly = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        let poly = self.poly_gradient();
         for k in 0..3 {
             g[k] += poly[k];
         }
@@ -232,7 +237,7 @@ impl Spline {
 
     /// `(U(x), ∇U(x))`.
     fn value_gradient(&self, kernel: Kernel, x: &Point3, hits: &mut Vec<u32>) -> (f64, Point3) {
-        let mut g = self.polynomial.map_or([0.0; 3], |v| [v[1], v[2], v[3]]);
+        let mut g = self.poly_gradient();
         let mut v = self.poly_value(x);
         for l in &self.levels {
             v += l.value(kernel, x, hits);

@@ -118,11 +118,11 @@ impl<'a> PreparedRegion<'a> {
         if points.len() <= usize::from(POINTS_BEFORE_GATHER) {
             return;
         }
-        let mut count = vec![0usize; self.parts.len()];
+        let mut count = [0usize; MAX_SPLIT * MAX_SPLIT * MAX_SPLIT];
         for p in points {
             count[self.part_of(p)] += 1;
         }
-        for (k, n) in count.into_iter().enumerate() {
+        for (k, &n) in count[..self.parts.len()].iter().enumerate() {
             if n + usize::from(self.single[k]) > usize::from(POINTS_BEFORE_GATHER) {
                 self.gather(k);
             }
@@ -185,15 +185,7 @@ impl<'a> PreparedRegion<'a> {
     /// `f(x)` with per-point queries (the centres sorted as the gathered lists are).
     fn single_value(&mut self, x: &Point3) -> f64 {
         let (f, hits) = (self.field, &mut self.hits);
-        let v = blend(&self.splines, x, |s, _| {
-            let mut v = s.poly_value(x);
-            for l in &s.levels {
-                l.index.within(x, l.support, hits);
-                hits.sort_unstable();
-                v += l.value_with(f.kernel, x, hits);
-            }
-            v
-        });
+        let v = blend(&self.splines, x, |s, _| s.value_sorted(f.kernel, x, hits));
         v + match &f.carrier {
             // Outside any gathered region: a sorted radius query, as a tile's list sums.
             Carrier::Local(l) => l.value_near(x, &mut NearPoints::new()),
