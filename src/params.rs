@@ -4,7 +4,7 @@
 use crate::clean::CleanParams;
 use crate::linalg::SolverKind;
 use crate::ordering::OrderingKind;
-use crate::rbf::{CarrierKind, CarrierParams, Kernel, Support};
+use crate::rbf::{CarrierKind, CarrierParams, Kernel, LocalFit, Support};
 use crate::spatial::IndexKind;
 
 /// Optional polynomial part of the spline.
@@ -395,6 +395,12 @@ pub fn choices() -> Vec<(&'static str, Vec<&'static str>)> {
             .map(CarrierKind::name)
             .to_vec(),
         ),
+        (
+            "local-fit",
+            [LocalFit::Auto, LocalFit::Plane, LocalFit::Quadric]
+                .map(LocalFit::name)
+                .to_vec(),
+        ),
         ("ordering", ["none", "bfs", "rcm"].to_vec()),
         ("solver", SolverKind::ALL.map(SolverKind::name).to_vec()),
         ("polynomial", ["none", "linear"].to_vec()),
@@ -543,6 +549,11 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub carrier: Option<crate::rbf::CarrierKind>,
+    /// Each point's term of the local carrier: auto (default: quadric on clean data, plane when noise is measured), plane (tangent planes), quadric (local quadrics fitted to the neighbours within R whose normals agree).
+    #[cfg_attr(feature = "cli", arg(long))]
+    #[serde(default, with = "from_str_opt")]
+    #[cfg_attr(feature = "server", param(value_type = Option<String>))]
+    pub local_fit: Option<crate::rbf::LocalFit>,
     /// Matrix ordering: none, bfs (default, seed Algorithm III), rcm.
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
@@ -682,7 +693,10 @@ impl TryFrom<&ReconOptions> for ReconParams {
             method,
             kernel: a.kernel.unwrap_or(d.kernel),
             support,
-            carrier: a.carrier.map_or(d.carrier, |kind| CarrierParams { kind }),
+            carrier: CarrierParams {
+                kind: a.carrier.unwrap_or(d.carrier.kind),
+                fit: a.local_fit.unwrap_or(d.carrier.fit),
+            },
             index: a.index.unwrap_or(d.index),
             leaf_size: a.leaf_size.unwrap_or(d.leaf_size),
             ordering: a.ordering.unwrap_or(d.ordering),

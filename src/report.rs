@@ -80,6 +80,9 @@ pub struct ParamsReport {
     pub neighbours: f64,
     /// Carrier actually fitted (`auto` resolved).
     pub carrier: String,
+    /// The local carrier's term per point, `plane` or `quadric` (`auto` resolved from the noise
+    /// estimate); null with another carrier.
+    pub local_fit: Option<&'static str>,
     /// Ordering name.
     pub ordering: String,
     /// Solver name.

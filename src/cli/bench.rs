@@ -100,6 +100,7 @@ fn table1(a: &BenchArgs) -> Result<()> {
         support: Support::Radius(0.2),
         carrier: crate::rbf::CarrierParams {
             kind: CarrierKind::Sphere,
+            ..Default::default()
         },
         index: IndexKind::Octree,
         leaf_size: 10,

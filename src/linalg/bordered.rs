@@ -10,10 +10,6 @@ use rayon::prelude::*;
 
 use super::{LinalgError, SpdFactor};
 
-/// Smallest accepted pivot of the 4 × 4 Cholesky relative to the diagonal entry it started from.
-/// Below it the polynomial columns are (numerically) linearly dependent: coplanar points.
-const RELATIVE_PIVOT_TOL: f64 = 1e-10;
-
 /// Solves the bordered system with the factor of `A`; returns `(λ, v)`.
 ///
 /// `poly` holds the n rows `[1, x, y, z]` of `P` (normalised units), `rhs` the n values `r`.
@@ -91,41 +87,11 @@ pub fn solve_bordered(
             s[b][a] = m;
         }
     }
-    let v = cholesky4_solve(s, g)?;
+    let v = super::small::cholesky_solve(&s, &g)?;
     let lambda = (0..n)
         .map(|i| u[i] - (0..4).map(|c| w[c][i] * v[c]).sum::<f64>())
         .collect();
     Ok((lambda, v))
-}
-
-/// Solves the 4 × 4 SPD system `S v = g` by Cholesky with a relative pivot check.
-fn cholesky4_solve(s: [[f64; 4]; 4], g: [f64; 4]) -> Result<[f64; 4], LinalgError> {
-    let mut l = [[0.0f64; 4]; 4];
-    for j in 0..4 {
-        let diag = s[j][j];
-        let pivot = diag - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
-        let relative_pivot = if diag > 0.0 { pivot / diag } else { 0.0 };
-        if !(relative_pivot > RELATIVE_PIVOT_TOL && pivot.is_finite()) {
-            return Err(LinalgError::Singular {
-                column: j,
-                relative_pivot,
-            });
-        }
-        let ljj = pivot.sqrt();
-        l[j][j] = ljj;
-        for i in j + 1..4 {
-            l[i][j] = (s[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>()) / ljj;
-        }
-    }
-    let mut y = [0.0f64; 4];
-    for i in 0..4 {
-        y[i] = (g[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = [0.0f64; 4];
-    for i in (0..4).rev() {
-        x[i] = (y[i] - (i + 1..4).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Ok(x)
 }
 
 #[cfg(test)]

@@ -24,6 +24,7 @@ pub mod dense;
 mod envelope;
 mod envelope_kernels;
 mod ldl;
+pub mod small;
 mod sparse;
 #[cfg(test)]
 mod test_support;

@@ -192,8 +192,10 @@ const MAX_PIECES: usize = 16;
 /// simplify is halved and its halves tried (down to [`MIN_PIECE`] triangles). The strips along the
 /// cuts keep the grid's triangles (a few per cent more triangles); every triangle is still within
 /// the tolerance of the original mesh (each piece is simplified once, from the original).
-/// `None` when the assembled mesh's topology is not `before`'s (the caller then simplifies the
-/// mesh whole).
+/// Where the assembled mesh has a defect along a cut (two pieces each made the same edge), the
+/// vertices around it are locked and the pieces holding them redone, up to [`SEAM_ROUNDS`] times.
+/// `None` when the assembled mesh's topology is still not `before`'s (the caller then simplifies
+/// the mesh whole).
 fn simplify_in_pieces(
     mesh: &mut TriMesh,
     tolerance: f64,
@@ -206,33 +208,64 @@ fn simplify_in_pieces(
         levels += 1;
     }
     let pieces = split_pieces(&mesh.vertices, &mesh.triangles, levels);
-    let done: Vec<(Vec<[u32; 3]>, SimplifyStats)> = pieces
+    let mut locks = vec![false; mesh.vertices.len()];
+    let mut done: Vec<(Vec<[u32; 3]>, SimplifyStats)> = pieces
         .par_iter()
-        .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance))
+        .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance, &locks))
         .collect();
-    let mut stats = SimplifyStats {
-        triangles_before: mesh.triangles.len(),
-        ..Default::default()
-    };
-    let mut triangles = Vec::with_capacity(mesh.triangles.len());
-    for (t, st) in done {
-        triangles.extend(t);
-        stats.absorb(&st);
+    let original_border = border_edges(&mesh.triangles);
+    for _ in 0..SEAM_ROUNDS {
+        let triangles: Vec<[u32; 3]> = done.iter().flat_map(|d| d.0.iter().copied()).collect();
+        let probe = TriMesh {
+            vertices: std::mem::take(&mut mesh.vertices),
+            triangles,
+            ..TriMesh::default()
+        };
+        let same = signature(&analyze(&probe)) == signature(before);
+        if same {
+            let mut stats = SimplifyStats {
+                triangles_before: mesh.triangles.len(),
+                ..Default::default()
+            };
+            done.iter().for_each(|d| stats.absorb(&d.1));
+            stats.triangles_after = probe.triangles.len();
+            mesh.vertices = probe.vertices;
+            mesh.triangles = probe.triangles;
+            return Some(stats);
+        }
+        // Two pieces can each make an edge between the same two vertices of their common cut (a
+        // collapse inside each, both allowed alone): lock around such seam defects and redo the
+        // pieces that hold a newly locked vertex.
+        let previous = locks.clone();
+        let found = lock_around_defects(
+            &probe,
+            &probe.triangles,
+            &original_border,
+            &mut locks,
+            LOCK_SCALE_FIRST,
+        );
+        mesh.vertices = probe.vertices;
+        if found != Some(true) {
+            return None;
+        }
+        let redo: Vec<usize> = (0..pieces.len())
+            .filter(|&i| {
+                (pieces[i].iter().flatten()).any(|&v| locks[v as usize] && !previous[v as usize])
+            })
+            .collect();
+        let again: Vec<(Vec<[u32; 3]>, SimplifyStats)> = redo
+            .par_iter()
+            .map(|&i| simplify_piece(&mesh.vertices, &pieces[i], tolerance, &locks))
+            .collect();
+        for (i, d) in redo.into_iter().zip(again) {
+            done[i] = d;
+        }
     }
-    let probe = TriMesh {
-        vertices: std::mem::take(&mut mesh.vertices),
-        triangles,
-        ..TriMesh::default()
-    };
-    let same = signature(&analyze(&probe)) == signature(before);
-    mesh.vertices = probe.vertices;
-    if !same {
-        return None;
-    }
-    stats.triangles_after = probe.triangles.len();
-    mesh.triangles = probe.triangles;
-    Some(stats)
+    None
 }
+
+/// Rounds of [`simplify_in_pieces`] that lock around defects where the pieces meet.
+const SEAM_ROUNDS: usize = 4;
 
 /// Fewest triangles of a piece that is halved when no attempt could simplify it.
 const MIN_PIECE: usize = 2_000;
@@ -244,6 +277,7 @@ fn simplify_piece(
     vertices: &[crate::geometry::Point3],
     piece: &[[u32; 3]],
     tolerance: f64,
+    extra_locks: &[bool],
 ) -> (Vec<[u32; 3]>, SimplifyStats) {
     let mut ids: Vec<u32> = piece.iter().flatten().copied().collect();
     ids.sort_unstable();
@@ -255,12 +289,15 @@ fn simplify_piece(
         ..TriMesh::default()
     };
     let before = analyze(&part);
-    let locks = pinch_rings(&part.triangles, part.vertices.len());
+    let mut locks = pinch_rings(&part.triangles, part.vertices.len());
+    for (l, &v) in locks.iter_mut().zip(&ids) {
+        *l |= extra_locks[v as usize];
+    }
     let stats = simplify_whole(&mut part, tolerance, &before, locks);
     if stats.tolerance_used == 0.0 && piece.len() >= 2 * MIN_PIECE {
         let mut out = (Vec::new(), stats);
         for half in split_pieces(vertices, piece, 1) {
-            let (t, st) = simplify_piece(vertices, &half, tolerance);
+            let (t, st) = simplify_piece(vertices, &half, tolerance, extra_locks);
             out.0.extend(t);
             out.1.absorb(&st);
         }

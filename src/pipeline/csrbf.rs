@@ -46,6 +46,10 @@ pub fn fit_field(
             Smoothing::Auto => noise.lambda,
             Smoothing::Lambda(l) => l,
         }),
+        carrier: crate::rbf::CarrierParams {
+            fit: params.carrier.fit.resolve(noise.noisy),
+            ..params.carrier
+        },
         ..params.clone()
     };
     let params = &resolved;
@@ -99,6 +103,10 @@ pub fn fit_field(
         _ => None,
     };
     let carrier_kind = carrier.kind();
+    let local_fit = match &carrier {
+        Carrier::Local(l) => Some(l.fit()),
+        _ => None,
+    };
     let carrier_bounds = carrier.zero_set_bounds();
     let field = Arc::new(RbfField {
         correction,
@@ -119,6 +127,7 @@ pub fn fit_field(
         support_radius: support.radius,
         carrier: Some(carrier_kind),
         carrier_bounds,
+        local_fit,
         normalization,
         points,
         clean: clean_stats,

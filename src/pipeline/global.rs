@@ -69,6 +69,7 @@ pub(super) fn fit_global(
         support_radius: 4.0 * support.spacing,
         carrier: None,
         carrier_bounds: None,
+        local_fit: None,
         normalization,
         points,
         clean: clean_stats,

@@ -42,6 +42,8 @@ pub struct FittedField {
     pub support_radius: f64,
     /// The fitted carrier (`None` for the global methods, which have none).
     pub carrier: Option<crate::rbf::CarrierKind>,
+    /// The local carrier's fit (`None` without a local carrier).
+    pub local_fit: Option<crate::rbf::LocalFit>,
     /// Bounds of the carrier's own zero set, when it has a closed analytic one.
     pub carrier_bounds: Option<Aabb>,
     /// Input units ↔ normalised units.
@@ -308,6 +310,7 @@ fn params_report(
         support_input_units: fit.support_radius / fit.normalization.scale,
         neighbours: fit.support.mean_neighbours,
         carrier: fit.carrier.map_or("none", |c| c.name()).to_string(),
+        local_fit: fit.local_fit.map(crate::rbf::LocalFit::name),
         ordering: params.ordering.to_string(),
         solver: params.solver.to_string(),
         polynomial: params.polynomial.to_string(),

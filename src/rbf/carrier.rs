@@ -23,7 +23,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 mod near;
+mod quadric;
 pub use near::NearPoints;
+pub use quadric::{LocalFit, Quadric};
 
 /// Which carrier solid to fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -268,6 +270,9 @@ pub const FAR_NEIGHBOURS: usize = 16;
 pub struct CarrierParams {
     /// Which solid.
     pub kind: CarrierKind,
+    /// How the local carrier fits each point's term (`Auto` is taken as `Quadric` here; the
+    /// pipelines resolve it from the noise estimate first, see [`LocalFit::resolve`]).
+    pub fit: LocalFit,
 }
 
 /// Fit the carrier to normalised `points` (with unit `normals` when known). The local carrier blends
@@ -289,7 +294,7 @@ pub fn fit_carrier(
         CarrierKind::Ellipsoid => fit_ellipsoid(points),
         _ => {
             let normals = normals.ok_or(CarrierError::NeedsNormals)?;
-            LocalCarrier::new(points, normals, radius, Arc::clone(index))
+            LocalCarrier::new(points, normals, radius, Arc::clone(index), params.fit)
                 .map(Carrier::Local)
                 .ok_or(CarrierError::NeedsNormals)
         }
@@ -449,6 +454,10 @@ pub struct LocalCarrier {
     points: Vec<Point3>,
     /// Unit normals; zero where the input normal was unusable (such points get no weight).
     normals: Vec<Point3>,
+    /// Each point's curvature correction of its plane ([`quadric`]); empty with planes.
+    quadrics: Vec<Quadric>,
+    /// `Plane` or `Quadric`.
+    fit: LocalFit,
     radius: f64,
     index: Arc<dyn SpatialIndex + Send>,
     valid_tree: KdTree,
@@ -470,29 +479,34 @@ impl std::fmt::Debug for LocalCarrier {
 }
 
 impl LocalCarrier {
-    /// Build from points, normals (same length, zero or non-finite = unusable), the support radius and an
-    /// index over `points`. `None` when no normal is usable.
+    /// Build from points, normals (same length, zero or non-finite = unusable), the support radius,
+    /// an index over `points` and the fit of each point's term (`Auto` = `Quadric`). `None` when
+    /// no normal is usable.
     pub fn new(
         points: &[Point3],
         normals: &[Point3],
         radius: f64,
         index: Arc<dyn SpatialIndex + Send>,
+        fit: LocalFit,
     ) -> Option<Self> {
         let normals: Vec<Point3> = normals
             .iter()
             .map(|n| normalized(*n).unwrap_or([0.0; 3]))
             .collect();
-        Self::from_parts(points.to_vec(), normals, radius, index)
+        Self::from_parts(points.to_vec(), normals, radius, index, fit)
     }
 
     /// Rebuild from saved parts: the points, their unit normals exactly as [`Self::normals`] gave
     /// them (not renormalised, so a loaded carrier evaluates bit for bit like the saved one), the
-    /// radius and an index over `points`. `None` when no normal is usable or the lengths differ.
+    /// radius, an index over `points` and the fit. `None` when no normal is usable or the lengths
+    /// differ. The quadrics are fitted again from these parts; flipping the normals negates them
+    /// exactly, so a carrier saved after [`Self::flip_normals`] loads bit for bit.
     pub fn from_parts(
         points: Vec<Point3>,
         normals: Vec<Point3>,
         radius: f64,
         index: Arc<dyn SpatialIndex + Send>,
+        fit: LocalFit,
     ) -> Option<Self> {
         let (valid_ids, valid_tree) = usable_points(&points, &normals)?;
         let winding =
@@ -504,6 +518,7 @@ impl LocalCarrier {
             index,
             (valid_ids, valid_tree),
             winding,
+            fit,
         ))
     }
 
@@ -519,10 +534,11 @@ impl LocalCarrier {
         radius: f64,
         index: Arc<dyn SpatialIndex + Send>,
         winding: Option<Arc<WindingGrid>>,
+        fit: LocalFit,
     ) -> Option<Self> {
         let usable = usable_points(&points, &normals)?;
         Some(Self::assemble(
-            points, normals, radius, index, usable, winding,
+            points, normals, radius, index, usable, winding, fit,
         ))
     }
 
@@ -533,10 +549,20 @@ impl LocalCarrier {
         index: Arc<dyn SpatialIndex + Send>,
         (valid_ids, valid_tree): (Vec<u32>, KdTree),
         winding: Option<Arc<WindingGrid>>,
+        fit: LocalFit,
     ) -> Self {
+        let (fit, quadrics) = match fit {
+            LocalFit::Plane => (LocalFit::Plane, Vec::new()),
+            _ => (
+                LocalFit::Quadric,
+                quadric::fit_quadrics(&points, &normals, radius, index.as_ref()),
+            ),
+        };
         LocalCarrier {
             points,
             normals,
+            quadrics,
+            fit,
             radius,
             index,
             valid_tree,
@@ -556,12 +582,30 @@ impl LocalCarrier {
         &self.normals
     }
 
+    /// How each point's term is fitted: `Plane` or `Quadric`.
+    pub fn fit(&self) -> LocalFit {
+        self.fit
+    }
+
+    /// Point `j`'s term `(h, ∇h)` at `x` (its plane, or its quadric).
+    #[inline]
+    fn term<const GRAD: bool>(&self, j: usize, x: &Point3, dist: f64) -> (f64, Point3) {
+        let (n, d) = (self.normals[j], sub(*x, self.points[j]));
+        match self.quadrics.get(j) {
+            Some(q) => q.term::<GRAD>(n, d, dist, self.radius),
+            None => (dot(n, d), n),
+        }
+    }
+
     /// Flip every normal (used when the input's normals turn out to point inwards), and the far
     /// field with them when this carrier owns it (a grid shared through [`Self::with_winding`] is
     /// the caller's to orient).
     pub fn flip_normals(&mut self) {
         for n in &mut self.normals {
             *n = [-n[0], -n[1], -n[2]];
+        }
+        for q in &mut self.quadrics {
+            q.negate();
         }
         if let Some(w) = self.winding.as_mut().and_then(Arc::get_mut) {
             w.negate();
@@ -821,9 +865,10 @@ impl LocalCarrier {
             if d2 >= r2 || n == [0.0; 3] {
                 continue;
             }
-            let t = d2.sqrt() * inv_r;
+            let d = d2.sqrt();
+            let t = d * inv_r;
             let w = Kernel::WendlandC2.value(t);
-            let dist = dot(n, diff);
+            let (dist, grad_dist) = self.term::<GRAD>(j, x, d);
             sw += w;
             swd += w * dist;
             if !GRAD {
@@ -838,7 +883,7 @@ impl LocalCarrier {
                 }
             }
             for k in 0..3 {
-                sg[k] += w * n[k] + dw[k] * dist;
+                sg[k] += w * grad_dist[k] + dw[k] * dist;
                 sdw[k] += dw[k];
             }
         }
@@ -864,10 +909,7 @@ impl LocalCarrier {
         // Never empty: `new` refuses a carrier without a usable normal.
         let (item, _) = self.valid_tree.nearest_one(x).unwrap_or((0, 0.0));
         let j = self.valid_ids[item as usize] as usize;
-        (
-            dot(self.normals[j], sub(*x, self.points[j])),
-            self.normals[j],
-        )
+        self.term::<true>(j, x, norm(sub(*x, self.points[j])))
     }
 
     /// Support radius of the weights, normalised units.
@@ -877,178 +919,4 @@ impl LocalCarrier {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn sphere_points(n: usize, c: Point3, r: f64) -> (Vec<Point3>, Vec<Point3>) {
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        (0..n)
-            .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let rr = (1.0 - z * z).sqrt();
-                let t = golden * i as f64;
-                let u = [rr * t.cos(), rr * t.sin(), z];
-                ([c[0] + r * u[0], c[1] + r * u[1], c[2] + r * u[2]], u)
-            })
-            .unzip()
-    }
-
-    fn local(p: &[Point3], n: &[Point3], r: f64) -> LocalCarrier {
-        let index: Arc<dyn SpatialIndex + Send> = Arc::from(
-            crate::spatial::build_index(p, crate::spatial::IndexKind::KdTree, 16).unwrap(),
-        );
-        LocalCarrier::new(p, n, r, index).unwrap()
-    }
-
-    #[test]
-    fn the_decided_far_field_is_the_blend_it_replaces() {
-        let (p, n) = sphere_points(2000, [0.5, 0.5, 0.5], 0.25);
-        let c = local(&p, &n, 0.05);
-        let (mut decided, mut undecided) = (0, 0);
-        for i in 0..20 * 20 * 20 {
-            let x = [i % 20, (i / 20) % 20, i / 400].map(|k| (k as f64 + 0.37) / 20.0);
-            let full = c.nearest_planes_with_far_field::<true>(&x);
-            let Some(far) = c.decided_far_field::<true>(&x) else {
-                undecided += 1;
-                continue;
-            };
-            decided += 1;
-            assert_eq!(far.0.to_bits(), full.0.to_bits(), "value at {x:?}");
-            for k in 0..3 {
-                assert!((far.1[k] - full.1[k]).abs() <= 1e-12, "{far:?} vs {full:?}");
-            }
-            assert_eq!(c.value_gradient_with(&x, &[]).0.to_bits(), far.0.to_bits());
-        }
-        // Inside the ball away from the shell and far outside: decided; near the shell: not.
-        assert!(decided > 4000 && undecided > 500, "{decided} / {undecided}");
-    }
-
-    #[test]
-    fn sphere_fit_recovers_center_and_radius() {
-        let (p, _) = sphere_points(500, [0.3, 0.5, 0.6], 0.25);
-        let Carrier::Sphere { center, radius } = fit_sphere(&p) else {
-            panic!()
-        };
-        assert!(norm(sub(center, [0.3, 0.5, 0.6])) < 1e-9);
-        assert!((radius - 0.25).abs() < 1e-9);
-    }
-
-    #[test]
-    fn ellipsoid_fit_of_a_sphere_is_the_sphere() {
-        let (p, _) = sphere_points(4000, [0.5; 3], 0.4);
-        let c = fit_ellipsoid(&p).unwrap();
-        for q in &p {
-            assert!(c.value(q).abs() < 5e-3, "{}", c.value(q));
-        }
-        assert!(c.value(&[0.5; 3]) < 0.0 && c.value(&[1.5, 0.5, 0.5]) > 0.0);
-    }
-
-    #[test]
-    fn flat_points_make_the_ellipsoid_refuse() {
-        let p: Vec<Point3> = (0..100)
-            .map(|i| [(i % 10) as f64, (i / 10) as f64, 0.0])
-            .collect();
-        assert!(matches!(
-            fit_ellipsoid(&p),
-            Err(CarrierError::Degenerate { .. })
-        ));
-    }
-
-    #[test]
-    fn analytic_gradients_match_finite_differences() {
-        let (p, n) = sphere_points(800, [0.5; 3], 0.3);
-        let carriers = [
-            fit_sphere(&p),
-            Carrier::Ellipsoid {
-                center: [0.5; 3],
-                axes: [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.0, -0.8, 0.6]],
-                semi_axes: [0.4, 0.3, 0.2],
-            },
-            Carrier::Local(local(&p, &n, 0.08)),
-            // An open cap: beside it the winding number is undecided (the far field's confidence
-            // varies), below its rim the planes hand over to the far field.
-            {
-                let keep: Vec<usize> = (0..p.len()).filter(|&i| p[i][1] > 0.45).collect();
-                let hp: Vec<Point3> = keep.iter().map(|&i| p[i]).collect();
-                let hn: Vec<Point3> = keep.iter().map(|&i| n[i]).collect();
-                Carrier::Local(local(&hp, &hn, 0.08))
-            },
-        ];
-        for c in &carriers {
-            for x in [
-                [0.71, 0.52, 0.48],
-                [0.2, 0.33, 0.61],
-                [0.5, 0.9, 0.4],
-                [0.5, 0.3, 0.45],
-                [0.93, 0.41, 0.52],
-            ] {
-                let g = c.gradient(&x);
-                let h = 1e-6;
-                for k in 0..3 {
-                    let (mut a, mut b) = (x, x);
-                    a[k] += h;
-                    b[k] -= h;
-                    let fd = (c.value(&a) - c.value(&b)) / (2.0 * h);
-                    let tol = 1e-5;
-                    assert!(
-                        (fd - g[k]).abs() < tol,
-                        "{} k={k}: fd {fd} vs {}",
-                        c.name(),
-                        g[k]
-                    );
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn one_bad_normal_makes_no_pocket_off_the_data() {
-        // A sphere of radius 0.3 with one normal turned 87° (as PCA gives on a thin ear): off the
-        // data, beyond the band R, the carrier must stay positive outside the sphere.
-        let (p, mut n) = sphere_points(2000, [0.5; 3], 0.3);
-        let bad = 1000;
-        let u = n[bad];
-        let t = normalized([u[1], -u[0], 0.0]).unwrap();
-        n[bad] = normalized([0.05 * u[0] + t[0], 0.05 * u[1] + t[1], 0.05 * u[2] + t[2]]).unwrap();
-        let r = 0.04;
-        let c = local(&p, &n, r);
-        for s in [1.2, 1.6, 2.5, 4.0] {
-            for dir in [t, [-t[0], -t[1], -t[2]]] {
-                // Off the bad point, outward by s·R and sideways along its wrong plane.
-                let x = [
-                    p[bad][0] + s * r * (u[0] + 0.3 * dir[0]),
-                    p[bad][1] + s * r * (u[1] + 0.3 * dir[1]),
-                    p[bad][2] + s * r * (u[2] + 0.3 * dir[2]),
-                ];
-                let outside = norm(sub(x, [0.5; 3])) - 0.3;
-                assert!(outside > 0.0);
-                let (g, _) = c.value_gradient(&x);
-                assert!(g > 0.0, "g = {g} at {x:?}, {outside} outside the sphere");
-            }
-        }
-    }
-
-    #[test]
-    fn local_carrier_has_the_sign_of_the_solid() {
-        let (p, n) = sphere_points(2000, [0.5; 3], 0.3);
-        let c = local(&p, &n, 0.08);
-        for (x, inside) in [
-            ([0.5, 0.5, 0.5], true),
-            ([0.5, 0.5, 0.75], true),
-            ([0.5, 0.5, 0.85], false),
-            ([0.0, 0.0, 0.0], false),
-        ] {
-            let (g, _) = c.value_gradient(&x);
-            assert_eq!(g < 0.0, inside, "g({x:?}) = {g}");
-        }
-        let max_off = p
-            .iter()
-            .map(|q| c.value_gradient(q).0.abs())
-            .fold(0.0, f64::max);
-        // Planes of a sphere of radius 0.3 blended over R = 0.08 miss the data by ~κR²/10.
-        assert!(
-            max_off < 0.05 * 0.08,
-            "offsets at the data should be small, got {max_off}"
-        );
-    }
-}
+mod tests;

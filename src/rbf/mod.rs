@@ -15,7 +15,7 @@ pub mod support;
 pub mod winding;
 
 pub use assemble::assemble_matrix;
-pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, fit_carrier};
+pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, LocalFit, fit_carrier};
 pub use field::{Correction, RbfField, Spline, SplineLevel, linear_poly};
 pub use kernel::Kernel;
 pub use levels::{LevelPlan, plan_levels};

@@ -140,7 +140,10 @@ fn every_solver_ordering_and_polynomial_gives_the_same_surface() {
     ] {
         for kernel in Kernel::ALL {
             let p = ReconParams {
-                carrier: CarrierParams { kind: carrier },
+                carrier: CarrierParams {
+                    kind: carrier,
+                    ..Default::default()
+                },
                 kernel,
                 polynomial: Polynomial::Linear,
                 ..base.clone()

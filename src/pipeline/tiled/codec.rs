@@ -12,7 +12,7 @@ use crate::clean::CleanStats;
 use crate::geometry::{Aabb, Normalization, Point3};
 use crate::params::{ReconParams, Smoothing};
 use crate::polygonize::PolygonizeStats;
-use crate::rbf::{CarrierKind, NoiseEstimate, SupportEstimate};
+use crate::rbf::{CarrierKind, LocalFit, NoiseEstimate, SupportEstimate};
 use crate::report::{BlockReport, LevelReport, MatrixReport, SolversUsed, Timings};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -25,6 +25,8 @@ struct PlanHeader {
     support: SupportEstimate,
     noise: NoiseEstimate,
     lambda: f64,
+    /// The local carrier's fit, resolved.
+    local_fit: LocalFit,
     /// `[core.min, core.max, outer.min, outer.max]` and members per block.
     blocks: Vec<([Point3; 4], usize)>,
     halo: f64,
@@ -92,6 +94,7 @@ impl Plan {
             support: self.support,
             noise: self.noise,
             lambda: self.params.smoothing.lambda(),
+            local_fit: self.params.carrier.fit,
             blocks: (self.blocks.iter())
                 .map(|b| {
                     (
@@ -126,7 +129,7 @@ impl Plan {
     }
 
     /// Decodes [`Plan::encode`]; `params` are the job's parameters (the plan stores only the
-    /// smoothing it resolved).
+    /// smoothing and the local fit it resolved).
     pub(crate) fn decode(
         bytes: &[u8],
         key: &str,
@@ -174,6 +177,10 @@ impl Plan {
             noise: h.noise,
             params: ReconParams {
                 smoothing: Smoothing::Lambda(h.lambda),
+                carrier: crate::rbf::CarrierParams {
+                    fit: h.local_fit,
+                    ..params.carrier
+                },
                 ..params.clone()
             },
             blocks: (h.blocks.iter())

@@ -429,6 +429,8 @@ fn params_report(plan: &Plan) -> ParamsReport {
         support_input_units: plan.support.radius / plan.normalization.scale,
         neighbours: plan.support.mean_neighbours,
         carrier: plan.carrier_kind.name().to_string(),
+        local_fit: (plan.carrier_kind == crate::rbf::CarrierKind::Local)
+            .then(|| p.carrier.fit.name()),
         ordering: p.ordering.to_string(),
         solver: p.solver.to_string(),
         polynomial: p.polynomial.to_string(),

@@ -91,7 +91,7 @@ pub(crate) struct Plan {
     pub normalization: Normalization,
     pub support: SupportEstimate,
     pub noise: NoiseEstimate,
-    /// The parameters with the smoothing resolved.
+    /// The parameters with the smoothing and the local carrier's fit resolved.
     pub params: ReconParams,
     pub blocks: Vec<BlockBox>,
     /// Extra reach of every stored point set beyond its box (the carrier's neighbourhoods).
@@ -463,6 +463,10 @@ pub(crate) fn prepare(
             Smoothing::Auto => noise.lambda,
             Smoothing::Lambda(l) => l,
         }),
+        carrier: crate::rbf::CarrierParams {
+            fit: params.carrier.fit.resolve(noise.noisy),
+            ..params.carrier
+        },
         ..params.clone()
     };
     progress.stage(Stage::Carrier);

@@ -235,6 +235,7 @@ fn build_carrier(
                 plan.support.radius,
                 Arc::clone(index),
                 winding.clone(),
+                plan.params.carrier.fit,
             )
             .ok_or(TiledError::NeedsNormals)?;
             Carrier::Local(local)

@@ -1,0 +1,255 @@
+//! Local quadrics for the local carrier's planes (Ohtake et al. 2003, "Multi-level partition of
+//! unity implicits", use local quadrics the same way): at every oriented point `p` a height field
+//! `w = c₀ + c₁u + c₂v + c₃u² + c₄uv + c₅v²` over its tangent frame `(u, v, w)` (normal `n` = `w`)
+//! is fitted by weighted least squares to the usable points within `R` whose normals agree with
+//! `n` (`n·n_k ≥` [`SAME_SIDE`]: the far side of a thin part or of a narrow gap is left out),
+//! weights Wendland `ψ(|p_k − p|/R)`. The carrier's term of `p` is then
+//! `h(x) = n·d − τ(|d|/R) (e₀ + l·d + dᵀQd)`, `d = x − p`, instead of the plane's `n·d`:
+//! it follows the surface's curvature, so the data points' offsets (what the spline has to make
+//! up) shrink to the fitting error, and the spline no longer sums curvature corrections of two
+//! close sheets into a web between them. `c₀` also averages the points' noise over the fit.
+//! `τ` is 1 up to `R` and fades smoothly (C¹) to the plane by `2R`, where the weights widen
+//! beyond `R` (sparse parts, off the data).
+//!
+//! A fit that is ill-posed (fewer than [`MIN_POINTS`] agreeing points, a singular system, or a
+//! tilt or curvature no sampled surface at this radius has) leaves the plane. `O(n k)`.
+
+use crate::geometry::{Point3, dot, norm, sub};
+use crate::rbf::Kernel;
+use crate::spatial::SpatialIndex;
+use rayon::prelude::*;
+
+/// How each oriented point's term of the local carrier is fitted (this module).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LocalFit {
+    /// `quadric` on clean data, `plane` where the noise estimate finds noise (a quadric over
+    /// the support radius follows noise; the planes' blend averages it).
+    #[default]
+    Auto,
+    /// The tangent plane `n·(x − p)` (Hoppe et al. 1992).
+    Plane,
+    /// A local quadric height field over the tangent plane, fitted to the points within `R`
+    /// whose normals agree (Ohtake et al. 2003).
+    Quadric,
+}
+
+impl LocalFit {
+    /// Command-line / report name.
+    pub fn name(self) -> &'static str {
+        match self {
+            LocalFit::Auto => "auto",
+            LocalFit::Plane => "plane",
+            LocalFit::Quadric => "quadric",
+        }
+    }
+
+    /// `Auto` resolved: `Plane` for noisy data, else `Quadric`; explicit choices unchanged.
+    pub fn resolve(self, noisy: bool) -> LocalFit {
+        match self {
+            LocalFit::Auto if noisy => LocalFit::Plane,
+            LocalFit::Auto => LocalFit::Quadric,
+            f => f,
+        }
+    }
+}
+
+impl std::fmt::Display for LocalFit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for LocalFit {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        [Self::Auto, Self::Plane, Self::Quadric]
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown local fit '{s}' (use auto, plane or quadric)"))
+    }
+}
+
+/// Least cosine between a point's normal and a neighbour's for the neighbour to enter its fit.
+pub const SAME_SIDE: f64 = 0.5;
+/// Fewest agreeing points (the point itself included) for a quadric; fewer leave the plane.
+pub const MIN_POINTS: usize = 10;
+/// Largest tilt `|(c₁, c₂)|` of a fit (the plane's normal more than 45° off: a bad fit).
+const MAX_TILT: f64 = 1.0;
+/// Largest curvature coefficient `|c₃|, |c₄|/2, |c₅|` in units of `1/R` (radius of curvature
+/// `R/8`: not resolvable by points spaced about `R/3`).
+const MAX_CURVATURE: f64 = 4.0;
+/// Ridge on the quadratic coefficients, relative to the total weight.
+const RIDGE: f64 = 1e-3;
+
+/// The correction of one point's plane, in world (normalised) units: `e₀ + l·d + dᵀQd`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Quadric {
+    /// Offset along the normal.
+    pub e0: f64,
+    /// Linear term (in the tangent plane).
+    pub l: Point3,
+    /// Symmetric quadratic form `[xx, xy, xz, yy, yz, zz]`.
+    pub q: [f64; 6],
+}
+
+impl Quadric {
+    /// Negate (the normal flipped).
+    pub fn negate(&mut self) {
+        self.e0 = -self.e0;
+        self.l = self.l.map(|v| -v);
+        self.q = self.q.map(|v| -v);
+    }
+
+    /// `(h, ∇h)` at offset `d = x − p` from the point (`dist = |d|`), with normal `n`, support
+    /// radius `r`; without `GRAD` the gradient is zero.
+    #[inline]
+    pub fn term<const GRAD: bool>(&self, n: Point3, d: Point3, dist: f64, r: f64) -> (f64, Point3) {
+        let plane = dot(n, d);
+        let q = &self.q;
+        let qd = [
+            q[0] * d[0] + q[1] * d[1] + q[2] * d[2],
+            q[1] * d[0] + q[3] * d[1] + q[4] * d[2],
+            q[2] * d[0] + q[4] * d[1] + q[5] * d[2],
+        ];
+        let corr = self.e0 + dot(self.l, d) + dot(qd, d);
+        let t = dist / r;
+        let (tau, dtau) = taper(t);
+        let h = plane - tau * corr;
+        if !GRAD {
+            return (h, [0.0; 3]);
+        }
+        let mut g = [0.0; 3];
+        for k in 0..3 {
+            g[k] = n[k] - tau * (self.l[k] + 2.0 * qd[k]);
+        }
+        if dtau != 0.0 && dist > 0.0 {
+            let s = dtau * corr / (r * dist);
+            for k in 0..3 {
+                g[k] -= s * d[k];
+            }
+        }
+        (h, g)
+    }
+}
+
+/// `(τ(t), τ'(t))`: 1 up to `t = 1`, a C¹ smoothstep down to 0 at `t = 2`.
+#[inline]
+fn taper(t: f64) -> (f64, f64) {
+    if t <= 1.0 {
+        (1.0, 0.0)
+    } else if t >= 2.0 {
+        (0.0, 0.0)
+    } else {
+        let u = t - 1.0;
+        (1.0 - u * u * (3.0 - 2.0 * u), -6.0 * u * (1.0 - u))
+    }
+}
+
+/// Fit the quadric of every point with a usable (unit, non-zero) normal over the points within
+/// `radius` found with `index`; unusable points and ill-posed fits get the plane.
+pub fn fit_quadrics(
+    points: &[Point3],
+    normals: &[Point3],
+    radius: f64,
+    index: &(dyn SpatialIndex + Send),
+) -> Vec<Quadric> {
+    (0..points.len())
+        .into_par_iter()
+        .map_init(Vec::new, |hits, j| {
+            if normals[j] == [0.0; 3] {
+                return Quadric::default();
+            }
+            index.within(&points[j], radius, hits);
+            hits.sort_unstable();
+            fit_one(points, normals, j, hits, radius).unwrap_or_default()
+        })
+        .collect()
+}
+
+/// Orthonormal tangent frame of the unit normal `n` (deterministic).
+fn frame(n: Point3) -> (Point3, Point3) {
+    let a = if n[0].abs() < 0.6 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let t1 = crate::geometry::normalized(crate::geometry::cross(n, a)).unwrap_or([0.0, 0.0, 1.0]);
+    (t1, crate::geometry::cross(n, t1))
+}
+
+#[allow(clippy::needless_range_loop)] // index loops mirror the normal equations
+fn fit_one(
+    points: &[Point3],
+    normals: &[Point3],
+    j: usize,
+    hits: &[u32],
+    radius: f64,
+) -> Option<Quadric> {
+    let (p, n) = (points[j], normals[j]);
+    let (t1, t2) = frame(n);
+    let inv_r = 1.0 / radius;
+    let mut m = [[0.0f64; 6]; 6];
+    let mut rhs = [0.0f64; 6];
+    let (mut count, mut total) = (0usize, 0.0);
+    for &k in hits {
+        let k = k as usize;
+        let nk = normals[k];
+        if nk == [0.0; 3] || dot(n, nk) < SAME_SIDE {
+            continue;
+        }
+        let d = sub(points[k], p);
+        let (u, v, w) = (dot(t1, d) * inv_r, dot(t2, d) * inv_r, dot(n, d) * inv_r);
+        let omega = Kernel::WendlandC2.value(norm(d) * inv_r);
+        if omega <= 0.0 {
+            continue;
+        }
+        let phi = [1.0, u, v, u * u, u * v, v * v];
+        for a in 0..6 {
+            let wa = omega * phi[a];
+            rhs[a] += wa * w;
+            for b in a..6 {
+                m[a][b] += wa * phi[b];
+            }
+        }
+        count += 1;
+        total += omega;
+    }
+    if count < MIN_POINTS {
+        return None;
+    }
+    for a in 0..6 {
+        for b in 0..a {
+            m[a][b] = m[b][a];
+        }
+        if a >= 3 {
+            m[a][a] += RIDGE * total;
+        }
+    }
+    let c = crate::linalg::small::cholesky_solve(&m, &rhs).ok()?;
+    let tilt = (c[1] * c[1] + c[2] * c[2]).sqrt();
+    let curv = c[3].abs().max(c[5].abs()).max(0.5 * c[4].abs());
+    if !(tilt <= MAX_TILT && curv <= MAX_CURVATURE) || c.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let e0 = c[0] * radius;
+    let l = [0, 1, 2].map(|k| c[1] * t1[k] + c[2] * t2[k]);
+    let s = inv_r;
+    let sym = |a: usize, b: usize| {
+        s * (c[3] * t1[a] * t1[b]
+            + 0.5 * c[4] * (t1[a] * t2[b] + t2[a] * t1[b])
+            + c[5] * t2[a] * t2[b])
+    };
+    Some(Quadric {
+        e0,
+        l,
+        q: [
+            sym(0, 0),
+            sym(0, 1),
+            sym(0, 2),
+            sym(1, 1),
+            sym(1, 2),
+            sym(2, 2),
+        ],
+    })
+}
