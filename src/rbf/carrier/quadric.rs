@@ -6,7 +6,7 @@
 //! weights Wendland `ψ(|p_k − p|/R)`. The carrier's term of `p` is then
 //! `h(x) = n·d − τ(|d|/R) (e₀ + l·d + dᵀQd)`, `d = x − p`, instead of the plane's `n·d`:
 //! it follows the surface's curvature, so the data points' offsets (what the spline has to make
-//! up) shrink to the fitting error (on a sampled sphere 8.4e-4 → 2.7e-6 of its size, see the
+//! up) shrink to the fitting error (on a sampled sphere 8.4e-4 → 2.7e-6 normalised units, see the
 //! tests) and the surface between the points follows the curvature instead of the spline's bumps.
 //! `c₀` also averages the points' noise over the fit.
 //! `τ` is 1 up to `R` and fades smoothly (C¹) to the plane by `2R`, where the weights widen
