@@ -420,6 +420,23 @@ pub fn choices() -> Vec<(&'static str, Vec<&'static str>)> {
 pub const BLOCKS_PATTERN: &str = "^(auto|none|[1-9][0-9]{3,8})$";
 
 impl ReconParams {
+    /// These parameters with what the measured `noise` chooses resolved: the smoothing λ (`auto`
+    /// takes the estimate's) and the local carrier's fit (`auto`: planes on noisy data, else
+    /// quadrics).
+    pub fn resolved_for(&self, noise: &crate::rbf::NoiseEstimate) -> ReconParams {
+        ReconParams {
+            smoothing: Smoothing::Lambda(match self.smoothing {
+                Smoothing::Auto => noise.lambda,
+                Smoothing::Lambda(l) => l,
+            }),
+            carrier: CarrierParams {
+                fit: self.carrier.fit.resolve(noise.noisy),
+                ..self.carrier
+            },
+            ..self.clone()
+        }
+    }
+
     /// Check ranges; the command line and the HTTP API call this before any work.
     pub fn validate(&self) -> Result<(), ParamError> {
         let err = |name, value: String, expected| {

@@ -213,7 +213,7 @@ fn simplify_in_pieces(
         .par_iter()
         .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance, &locks))
         .collect();
-    let original_border = border_edges(&mesh.triangles);
+    let mut original_border = None;
     for _ in 0..SEAM_ROUNDS {
         let triangles: Vec<[u32; 3]> = done.iter().flat_map(|d| d.0.iter().copied()).collect();
         let probe = TriMesh {
@@ -237,10 +237,11 @@ fn simplify_in_pieces(
         // collapse inside each, both allowed alone): lock around such seam defects and redo the
         // pieces that hold a newly locked vertex.
         let previous = locks.clone();
+        let border = original_border.get_or_insert_with(|| border_edges(&mesh.triangles));
         let found = lock_around_defects(
             &probe,
             &probe.triangles,
-            &original_border,
+            border,
             &mut locks,
             LOCK_SCALE_FIRST,
         );

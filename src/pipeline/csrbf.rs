@@ -6,7 +6,7 @@ use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverKind, SolverParams, factorize_owned, solve_bordered};
 use crate::normals::{NormalParams, estimate_oriented_normals};
 use crate::ordering::{MatrixShape, Permutation, compute_ordering, matrix_shape};
-use crate::params::{Method, Polynomial, ReconParams, Smoothing};
+use crate::params::{Method, Polynomial, ReconParams};
 use crate::progress::Progress;
 use crate::rbf::{
     Carrier, CarrierKind, Correction, Kernel, LevelPlan, RbfError, RbfField, Spline, SplineLevel,
@@ -41,17 +41,7 @@ pub fn fit_field(
     let noise = crate::rbf::estimate_noise(&points, support.spacing, |p, k, out| {
         index.nearest_k(p, k, out)
     });
-    let resolved = ReconParams {
-        smoothing: Smoothing::Lambda(match params.smoothing {
-            Smoothing::Auto => noise.lambda,
-            Smoothing::Lambda(l) => l,
-        }),
-        carrier: crate::rbf::CarrierParams {
-            fit: params.carrier.fit.resolve(noise.noisy),
-            ..params.carrier
-        },
-        ..params.clone()
-    };
+    let resolved = params.resolved_for(&noise);
     let params = &resolved;
     let count = params.levels;
     // With blocks only one block's system is alive at a time (core plus overlap: ~1.5× its core).

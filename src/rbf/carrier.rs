@@ -587,10 +587,10 @@ impl LocalCarrier {
         self.fit
     }
 
-    /// Point `j`'s term `(h, ∇h)` at `x` (its plane, or its quadric).
+    /// Point `j`'s term `(h, ∇h)` at `x = p_j + d`, `dist = |d|` (its plane, or its quadric).
     #[inline]
-    fn term<const GRAD: bool>(&self, j: usize, x: &Point3, dist: f64) -> (f64, Point3) {
-        let (n, d) = (self.normals[j], sub(*x, self.points[j]));
+    fn term<const GRAD: bool>(&self, j: usize, d: Point3, dist: f64) -> (f64, Point3) {
+        let n = self.normals[j];
         match self.quadrics.get(j) {
             Some(q) => q.term::<GRAD>(n, d, dist, self.radius),
             None => (dot(n, d), n),
@@ -868,7 +868,7 @@ impl LocalCarrier {
             let d = d2.sqrt();
             let t = d * inv_r;
             let w = Kernel::WendlandC2.value(t);
-            let (dist, grad_dist) = self.term::<GRAD>(j, x, d);
+            let (dist, grad_dist) = self.term::<GRAD>(j, diff, d);
             sw += w;
             swd += w * dist;
             if !GRAD {
@@ -909,7 +909,8 @@ impl LocalCarrier {
         // Never empty: `new` refuses a carrier without a usable normal.
         let (item, _) = self.valid_tree.nearest_one(x).unwrap_or((0, 0.0));
         let j = self.valid_ids[item as usize] as usize;
-        self.term::<true>(j, x, norm(sub(*x, self.points[j])))
+        let d = sub(*x, self.points[j]);
+        self.term::<true>(j, d, norm(d))
     }
 
     /// Support radius of the weights, normalised units.

@@ -29,7 +29,7 @@ use super::{TiledError, TiledOptions};
 use crate::clean::{CleanStats, InputError, check_degenerate};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Normalization, Point3};
-use crate::params::{Boundary, ReconParams, Smoothing};
+use crate::params::{Boundary, ReconParams};
 use crate::progress::{Progress, Stage};
 use crate::rbf::winding::WindingGrid;
 use crate::rbf::{
@@ -458,17 +458,7 @@ pub(crate) fn prepare(
     )?;
     super::super::check_cancel(progress)?;
     let (support, noise) = (part.support, part.noise);
-    let resolved = ReconParams {
-        smoothing: Smoothing::Lambda(match params.smoothing {
-            Smoothing::Auto => noise.lambda,
-            Smoothing::Lambda(l) => l,
-        }),
-        carrier: crate::rbf::CarrierParams {
-            fit: params.carrier.fit.resolve(noise.noisy),
-            ..params.carrier
-        },
-        ..params.clone()
-    };
+    let resolved = params.resolved_for(&noise);
     progress.stage(Stage::Carrier);
     let mut sample_normals = s.has_normals.then(|| s.normals.clone());
     let (carrier, carrier_kind, normals_flipped) =

@@ -235,11 +235,11 @@ fn fit_one(
     }
     let e0 = c[0] * radius;
     let l = [0, 1, 2].map(|k| c[1] * t1[k] + c[2] * t2[k]);
-    let s = inv_r;
     let sym = |a: usize, b: usize| {
-        s * (c[3] * t1[a] * t1[b]
-            + 0.5 * c[4] * (t1[a] * t2[b] + t2[a] * t1[b])
-            + c[5] * t2[a] * t2[b])
+        inv_r
+            * (c[3] * t1[a] * t1[b]
+                + 0.5 * c[4] * (t1[a] * t2[b] + t2[a] * t1[b])
+                + c[5] * t2[a] * t2[b])
     };
     Some(Quadric {
         e0,
