@@ -132,41 +132,42 @@ fn norm1_symmetric_lower(a: &Mat<f64>) -> f64 {
 /// Build an `n × n` matrix column by column in parallel (`f(i, j)` only called for `i ≥ j`; the
 /// strict upper triangle is left zero because `LBLᵀ` reads the lower one).
 pub fn lower_from_fn(n: usize, f: impl Fn(usize, usize) -> f64 + Sync) -> Mat<f64> {
-    use rayon::prelude::*;
-    let mut buf = vec![0.0; n * n];
-    buf.par_chunks_mut(n.max(1))
-        .enumerate()
-        .for_each(|(j, col)| {
-            for (i, v) in col.iter_mut().enumerate().skip(j) {
-                *v = f(i, j);
-            }
-        });
-    faer::MatRef::from_column_major_slice(&buf, n, n).to_owned()
+    match lower_from_fn_cancellable(n, f, &crate::progress::NoProgress) {
+        Ok(a) => a,
+        Err(_) => unreachable!("NoProgress never cancels"),
+    }
 }
 
 /// [`lower_from_fn`] that skips the remaining columns once `progress.cancelled()` turns true and
 /// then answers [`LinalgError::Cancelled`] (an `n²` build of a 12,000-unknown system takes seconds).
+/// The columns are written in place (no second `n²` buffer to copy).
 pub fn lower_from_fn_cancellable(
     n: usize,
     f: impl Fn(usize, usize) -> f64 + Sync,
     progress: &dyn Progress,
 ) -> Result<Mat<f64>, LinalgError> {
     use rayon::prelude::*;
-    let mut buf = vec![0.0; n * n];
-    buf.par_chunks_mut(n.max(1))
-        .enumerate()
-        .for_each(|(j, col)| {
-            if j % 16 == 0 && progress.cancelled() {
-                return;
-            }
-            for (i, v) in col.iter_mut().enumerate().skip(j) {
-                *v = f(i, j);
-            }
-        });
-    if progress.cancelled() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let mut a = Mat::<f64>::zeros(n, n);
+    // Asking `progress` costs a clock read: every 16th column asks, and its answer stops
+    // every column after it.
+    let stopped = AtomicBool::new(false);
+    a.par_col_iter_mut().enumerate().for_each(|(j, mut col)| {
+        if stopped.load(Ordering::Relaxed) {
+            return;
+        }
+        if j % 16 == 0 && progress.cancelled() {
+            stopped.store(true, Ordering::Relaxed);
+            return;
+        }
+        for i in j..n {
+            col[i] = f(i, j);
+        }
+    });
+    if stopped.load(Ordering::Relaxed) || progress.cancelled() {
         return Err(LinalgError::Cancelled);
     }
-    Ok(faer::MatRef::from_column_major_slice(&buf, n, n).to_owned())
+    Ok(a)
 }
 
 /// Mirror the lower triangle into the upper one (for products with the full matrix).

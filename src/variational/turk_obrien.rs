@@ -451,22 +451,26 @@ fn solve_hermite<const D: usize>(
     }
     let pts: Vec<[f64; D]> = s.iter().map(|x| x.p).collect();
     check_affine_rank(&pts, &(0..s.len()).collect::<Vec<_>>())?;
-    let a = lower_from_fn(m + D + 1, |i, j| {
-        if i < m {
-            let (fi, fj) = (funcs[i], funcs[j]);
-            hermite_entry(kernel, &pts[fi.point], &pts[fj.point], fi, fj)
-        } else if j < m {
-            let f = funcs[j];
-            match (i - m, f.axis) {
-                (0, None) => 1.0,
-                (0, Some(_)) => 0.0,
-                (q, None) => pts[f.point][q - 1],
-                (q, Some(k)) => f64::from(u8::from(q - 1 == k)),
+    let a = crate::linalg::dense::lower_from_fn_cancellable(
+        m + D + 1,
+        |i, j| {
+            if i < m {
+                let (fi, fj) = (funcs[i], funcs[j]);
+                hermite_entry(kernel, &pts[fi.point], &pts[fj.point], fi, fj)
+            } else if j < m {
+                let f = funcs[j];
+                match (i - m, f.axis) {
+                    (0, None) => 1.0,
+                    (0, Some(_)) => 0.0,
+                    (q, None) => pts[f.point][q - 1],
+                    (q, Some(k)) => f64::from(u8::from(q - 1 == k)),
+                }
+            } else {
+                0.0
             }
-        } else {
-            0.0
-        }
-    });
+        },
+        progress,
+    )?;
     let solver = SymmetricSolver::new_cancellable(a, progress)?;
     let mut b = Mat::<f64>::from_fn(m + D + 1, 1, |i, _| match funcs.get(i) {
         Some(Functional { point, axis: None }) => s[*point].value,
