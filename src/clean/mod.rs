@@ -101,8 +101,9 @@ pub enum InputError {
     },
 }
 
-/// Clean `cloud`: returns the kept points (input units), unit normals (zero vectors where invalid)
-/// and statistics.
+/// Clean `cloud`: returns the kept points (input units) in Morton order
+/// ([`crate::spatial::morton_order`]), unit normals (zero vectors where invalid), the other
+/// attributes alike, and statistics.
 pub fn clean_cloud(
     cloud: &PointCloud,
     params: &CleanParams,
@@ -137,7 +138,16 @@ pub fn clean_cloud(
     } else {
         vec![true; pts.len()]
     };
-    let kept: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
+    // The kept points in Morton order: every later stage's neighbour accesses then stay in
+    // cache (a file in random order cost twice the time, see `spatial::morton_order`).
+    let kept: Vec<usize> = {
+        let unique: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
+        let at: Vec<Point3> = unique.iter().map(|&k| pts[k]).collect();
+        crate::spatial::morton_order(&at)
+            .into_iter()
+            .map(|i| unique[i])
+            .collect()
+    };
     let points: Vec<Point3> = kept.iter().map(|&k| pts[k]).collect();
     let mut invalid_normals = 0;
     let normals = cloud

@@ -16,6 +16,7 @@
 mod batch;
 pub mod brute_force;
 mod kdtree;
+mod morton;
 mod octree;
 mod octree_removal;
 mod octree_search;
@@ -29,6 +30,7 @@ use crate::geometry::Point3;
 
 pub use batch::{NeighbourLists, within_batch};
 pub use kdtree::KdTree;
+pub use morton::morton_order;
 pub use octree::{MAX_DEPTH, Octree, OctreeParams, OctreeStats};
 pub use octree_removal::RemovalSet;
 

@@ -93,6 +93,35 @@ fn points_far_from_the_origin_give_the_same_mesh_shifted() {
 }
 
 #[test]
+fn the_order_of_the_points_in_the_file_does_not_change_the_mesh() {
+    // The cleaned cloud is put in Morton order, so every later stage sees the same arrays:
+    // before, the armadillo 10k with true normals came out genus 0, 2 and 0 from three shuffles
+    // of its file (camel 2, 4, 4). Reversed and scrambled copies of a torus, with and without
+    // normals (the estimated normals follow the order too), give the same mesh bit for bit.
+    let shape = Shape::by_name("torus").unwrap();
+    let cloud = shape.sample(3000, 9);
+    let n = cloud.points.len();
+    let reversed: Vec<usize> = (0..n).rev().collect();
+    let scrambled: Vec<usize> = (0..n).map(|i| (i * 1237 + 11) % n).collect();
+    let mut check = scrambled.clone();
+    check.sort_unstable();
+    assert!(check.iter().enumerate().all(|(i, &k)| i == k), "a permutation");
+    for normals in [true, false] {
+        let base = PointCloud {
+            normals: cloud.normals.clone().filter(|_| normals),
+            ..cloud.clone()
+        };
+        let a = reconstruct(&base, &ReconParams::default(), &NoProgress).unwrap();
+        assert_eq!(a.report.mesh.genus, Some(1));
+        for order in [&reversed, &scrambled] {
+            let b = reconstruct(&base.select(order), &ReconParams::default(), &NoProgress).unwrap();
+            assert_eq!(a.mesh.triangles, b.mesh.triangles, "normals {normals}");
+            assert_eq!(a.mesh.vertices, b.mesh.vertices, "normals {normals}");
+        }
+    }
+}
+
+#[test]
 fn every_solver_ordering_and_polynomial_gives_the_same_surface() {
     let shape = Shape::by_name("sphere").unwrap();
     let cloud = shape.sample(1500, 11);
