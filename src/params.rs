@@ -395,12 +395,7 @@ pub fn choices() -> Vec<(&'static str, Vec<&'static str>)> {
             .map(CarrierKind::name)
             .to_vec(),
         ),
-        (
-            "local-fit",
-            [LocalFit::Auto, LocalFit::Plane, LocalFit::Quadric]
-                .map(LocalFit::name)
-                .to_vec(),
-        ),
+        ("local-fit", LocalFit::ALL.map(LocalFit::name).to_vec()),
         ("ordering", ["none", "bfs", "rcm"].to_vec()),
         ("solver", SolverKind::ALL.map(SolverKind::name).to_vec()),
         ("polynomial", ["none", "linear"].to_vec()),
@@ -421,7 +416,7 @@ pub const BLOCKS_PATTERN: &str = "^(auto|none|[1-9][0-9]{3,8})$";
 
 impl ReconParams {
     /// These parameters with what the measured `noise` chooses resolved: the smoothing λ (`auto`
-    /// takes the estimate's) and the local carrier's fit (`auto`: planes on noisy data, else
+    /// takes the estimate's) and the local carrier's fit (`auto`: wide quadrics on noisy data, else
     /// quadrics).
     pub fn resolved_for(&self, noise: &crate::rbf::NoiseEstimate) -> ReconParams {
         ReconParams {
@@ -566,7 +561,7 @@ pub struct ReconOptions {
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]
     pub carrier: Option<crate::rbf::CarrierKind>,
-    /// Each point's term of the local carrier: auto (default: quadric on clean data, plane when noise is measured), plane (tangent planes), quadric (local quadrics fitted to the neighbours within R whose normals agree).
+    /// Each point's term of the local carrier: auto (default: quadric on clean data, wide-quadric when noise is measured), plane (tangent planes), quadric (local quadrics fitted to the neighbours within R whose normals agree), wide-quadric (the same fitted within 2R: averages noise).
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]

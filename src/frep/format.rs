@@ -11,7 +11,7 @@
 //! | 1+1+2+4 | kernel `u8` (0 C⁰, 1 C², 2 C⁴), index `u8` (0 octree, 1 k-d tree), 2 zero bytes, leaf size `u32` |
 //! | 16 | carrier radius `f64`, finest support `f64` (normalised units) |
 //! | 8 + 24n | `u64` n, the n data points `f64×3` (normalised units) |
-//! | … | carrier: `u8` tag 0 sphere (centre `f64×3`, radius `f64`), 1 ellipsoid (centre `f64×3`, axes `f64×9` row by row, semi-axes `f64×3`), 2 local with tangent planes, 3 local with quadrics (both: radius `f64`, n normals `f64×3`, on the data points; the quadrics are fitted again on load, bit for bit) |
+//! | … | carrier: `u8` tag 0 sphere (centre `f64×3`, radius `f64`), 1 ellipsoid (centre `f64×3`, axes `f64×9` row by row, semi-axes `f64×3`), 2 local with tangent planes, 3 local with quadrics, 4 local with wide quadrics (all three: radius `f64`, n normals `f64×3`, on the data points; the quadrics are fitted again on load, bit for bit) |
 //! | … | correction: `u8` tag 0 global (one spline), 1 blocks (`u64` count, then per block: core min/max `f64×6`, outer min/max `f64×6`, spline) |
 //! | 8 | FNV-1a 64 of every byte before it |
 //!
@@ -130,6 +130,7 @@ pub fn encode(model: &FieldModel) -> Vec<u8> {
         Carrier::Local(l) => {
             w.u8(match l.fit() {
                 LocalFit::Plane => 2,
+                LocalFit::WideQuadric => 4,
                 _ => 3,
             });
             w.f(l.radius());
@@ -370,13 +371,13 @@ fn read_carrier(
                 semi_axes,
             }
         }
-        tag @ (2 | 3) => {
+        tag @ 2..=4 => {
             let radius = positive(r.finite("the carrier radius")?, "the carrier radius")?;
             let normals = r.points(points.len())?;
-            let fit = if tag == 2 {
-                LocalFit::Plane
-            } else {
-                LocalFit::Quadric
+            let fit = match tag {
+                2 => LocalFit::Plane,
+                3 => LocalFit::Quadric,
+                _ => LocalFit::WideQuadric,
             };
             let local =
                 LocalCarrier::from_parts(points.to_vec(), normals, radius, Arc::clone(index), fit);

@@ -551,11 +551,15 @@ impl LocalCarrier {
         winding: Option<Arc<WindingGrid>>,
         fit: LocalFit,
     ) -> Self {
-        let (fit, quadrics) = match fit {
-            LocalFit::Plane => (LocalFit::Plane, Vec::new()),
-            _ => (
-                LocalFit::Quadric,
-                quadric::fit_quadrics(&points, &normals, radius, index.as_ref()),
+        let (fit, quadrics) = match fit.fit_scale() {
+            None => (LocalFit::Plane, Vec::new()),
+            Some(scale) => (
+                if fit == LocalFit::Auto {
+                    LocalFit::Quadric
+                } else {
+                    fit
+                },
+                quadric::fit_quadrics(&points, &normals, scale * radius, index.as_ref()),
             ),
         };
         LocalCarrier {

@@ -24,8 +24,8 @@ use rayon::prelude::*;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LocalFit {
-    /// `quadric` on clean data, `plane` where the noise estimate finds noise (a quadric over
-    /// the support radius follows noise; the planes' blend averages it).
+    /// `quadric` on clean data, `wide-quadric` where the noise estimate finds noise (a quadric
+    /// over the support radius follows the noise; one over twice the radius averages it).
     #[default]
     Auto,
     /// The tangent plane `n·(x − p)` (Hoppe et al. 1992).
@@ -33,22 +33,44 @@ pub enum LocalFit {
     /// A local quadric height field over the tangent plane, fitted to the points within `R`
     /// whose normals agree (Ohtake et al. 2003).
     Quadric,
+    /// The same quadric fitted over [`WIDE_FIT`] times the support radius (about four times
+    /// the points): its offset and curvature average the noise instead of following it.
+    WideQuadric,
 }
 
 impl LocalFit {
+    /// Every choice, in the order the command line lists them.
+    pub const ALL: [LocalFit; 4] = [
+        LocalFit::Auto,
+        LocalFit::Plane,
+        LocalFit::Quadric,
+        LocalFit::WideQuadric,
+    ];
+
+    /// The radius the quadrics are fitted over, as a multiple of the support radius (`None`:
+    /// planes, nothing fitted; `Auto` counts as `Quadric`).
+    pub fn fit_scale(self) -> Option<f64> {
+        match self {
+            LocalFit::Plane => None,
+            LocalFit::Auto | LocalFit::Quadric => Some(1.0),
+            LocalFit::WideQuadric => Some(WIDE_FIT),
+        }
+    }
+
     /// Command-line / report name.
     pub fn name(self) -> &'static str {
         match self {
             LocalFit::Auto => "auto",
             LocalFit::Plane => "plane",
             LocalFit::Quadric => "quadric",
+            LocalFit::WideQuadric => "wide-quadric",
         }
     }
 
-    /// `Auto` resolved: `Plane` for noisy data, else `Quadric`; explicit choices unchanged.
+    /// `Auto` resolved: `WideQuadric` for noisy data, else `Quadric`; explicit choices unchanged.
     pub fn resolve(self, noisy: bool) -> LocalFit {
         match self {
-            LocalFit::Auto if noisy => LocalFit::Plane,
+            LocalFit::Auto if noisy => LocalFit::WideQuadric,
             LocalFit::Auto => LocalFit::Quadric,
             f => f,
         }
@@ -64,13 +86,18 @@ impl std::fmt::Display for LocalFit {
 impl std::str::FromStr for LocalFit {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        [Self::Auto, Self::Plane, Self::Quadric]
+        Self::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown local fit '{s}' (use auto, plane or quadric)"))
+            .ok_or_else(|| {
+                format!("unknown local fit '{s}' (use auto, plane, quadric or wide-quadric)")
+            })
     }
 }
 
+/// The wide quadrics' fit radius in support radii (measured on noisy scans: 2 brings the
+/// noisy armadillo, bunny and 10⁶ torus to screened Poisson's Chamfer, see docs/robustness.md).
+pub const WIDE_FIT: f64 = 2.0;
 /// Least cosine between a point's normal and a neighbour's for the neighbour to enter its fit.
 pub const SAME_SIDE: f64 = 0.5;
 /// Fewest agreeing points (the point itself included) for a quadric; fewer leave the plane.
