@@ -60,7 +60,11 @@ mod tests {
             for b in 0..21 {
                 assert_eq!((s >> (3 * b)) & 1, (v >> b) & 1, "bit {b} of {v:#x}");
             }
-            assert_eq!(s & !0x1249_2492_4924_9249, 0, "{v:#x} only on every third bit");
+            assert_eq!(
+                s & !0x1249_2492_4924_9249,
+                0,
+                "{v:#x} only on every third bit"
+            );
         }
     }
 
@@ -92,7 +96,10 @@ mod tests {
         let scrambled: Vec<usize> = (0..pts.len()).collect();
         let (sorted, before) = (mean_step(&order), mean_step(&scrambled));
         assert!(sorted < 0.2, "mean step {sorted} (grid spacing 0.1)");
-        assert!(before > 10.0 * sorted, "scrambled {before} vs sorted {sorted}");
+        assert!(
+            before > 10.0 * sorted,
+            "scrambled {before} vs sorted {sorted}"
+        );
         assert_eq!(morton_order(&pts), order, "deterministic");
         assert_eq!(morton_order(&[[1.0; 3]; 3]), vec![0, 1, 2], "ties by index");
     }

@@ -105,7 +105,10 @@ fn the_order_of_the_points_in_the_file_does_not_change_the_mesh() {
     let scrambled: Vec<usize> = (0..n).map(|i| (i * 1237 + 11) % n).collect();
     let mut check = scrambled.clone();
     check.sort_unstable();
-    assert!(check.iter().enumerate().all(|(i, &k)| i == k), "a permutation");
+    assert!(
+        check.iter().enumerate().all(|(i, &k)| i == k),
+        "a permutation"
+    );
     for normals in [true, false] {
         let base = PointCloud {
             normals: cloud.normals.clone().filter(|_| normals),
