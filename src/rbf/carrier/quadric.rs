@@ -14,6 +14,10 @@
 //!
 //! A fit that is ill-posed (fewer than [`MIN_POINTS`] agreeing points, a singular system, or a
 //! tilt or curvature no sampled surface at this radius has) leaves the plane. `O(n k)`.
+//!
+//! [`LocalFit::WideQuadric`] fits the same quadric over `2R` (weights `ψ(d/2R)`): on noisy data
+//! the fit then averages about four times the points (chosen by `auto` when the noise estimate
+//! finds noise); the term is evaluated and faded as above.
 
 use crate::geometry::{Point3, dot, norm, sub};
 use crate::rbf::Kernel;
@@ -104,8 +108,9 @@ pub const SAME_SIDE: f64 = 0.5;
 pub const MIN_POINTS: usize = 10;
 /// Largest tilt `|(c₁, c₂)|` of a fit (the plane's normal more than 45° off: a bad fit).
 const MAX_TILT: f64 = 1.0;
-/// Largest curvature coefficient `|c₃|, |c₄|/2, |c₅|` in units of `1/R` (radius of curvature
-/// `R/8`: not resolvable by points spaced about `R/3`).
+/// Largest curvature coefficient `|c₃|, |c₄|/2, |c₅|` in units of one over the fit radius
+/// (radius of curvature `R/8` over R: not resolvable by points spaced about `R/3`; `R/2` for the
+/// wide fits over 2R, which are meant to smooth).
 const MAX_CURVATURE: f64 = 4.0;
 /// Ridge on the quadratic coefficients, relative to the total weight.
 const RIDGE: f64 = 1e-3;
