@@ -140,14 +140,8 @@ pub fn clean_cloud(
     };
     // The kept points in Morton order: every later stage's neighbour accesses then stay in
     // cache (a file in random order cost twice the time, see `spatial::morton_order`).
-    let kept: Vec<usize> = {
-        let unique: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
-        let at: Vec<Point3> = unique.iter().map(|&k| pts[k]).collect();
-        crate::spatial::morton_order(&at)
-            .into_iter()
-            .map(|i| unique[i])
-            .collect()
-    };
+    let mut kept: Vec<usize> = (0..pts.len()).filter(|&k| keep[k]).collect();
+    crate::spatial::sort_by_morton(&pts, &mut kept);
     let points: Vec<Point3> = kept.iter().map(|&k| pts[k]).collect();
     let mut invalid_normals = 0;
     let normals = cloud

@@ -30,7 +30,7 @@ use crate::geometry::Point3;
 
 pub use batch::{NeighbourLists, within_batch};
 pub use kdtree::KdTree;
-pub use morton::morton_order;
+pub use morton::{morton_order, sort_by_morton};
 pub use octree::{MAX_DEPTH, Octree, OctreeParams, OctreeStats};
 pub use octree_removal::RemovalSet;
 

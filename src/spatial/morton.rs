@@ -14,28 +14,44 @@ const BITS: u32 = 21;
 /// bounding box (21 bits per axis), ties by index: deterministic, `O(n log n)`, parallel.
 /// Non-finite coordinates count as the box's low corner.
 pub fn morton_order(points: &[Point3]) -> Vec<usize> {
-    if points.is_empty() {
-        return Vec::new();
+    let mut ids: Vec<usize> = (0..points.len()).collect();
+    sort_by_morton(points, &mut ids);
+    ids
+}
+
+/// Sort `ids` (indices into `points`) by the Morton code of `points[id]` over the bounding box of
+/// the points they name, ties by id: [`morton_order`] of a subset without copying it (16 bytes
+/// per id while sorting).
+pub fn sort_by_morton(points: &[Point3], ids: &mut [usize]) {
+    if ids.is_empty() {
+        return;
     }
-    let bbox = Aabb::from_points(points);
+    let mut bbox = Aabb {
+        min: points[ids[0]],
+        max: points[ids[0]],
+    };
+    for &i in ids.iter() {
+        bbox.grow(&points[i]);
+    }
     let cells = f64::from((1u32 << BITS) - 1);
     let scale: [f64; 3] = std::array::from_fn(|k| {
         let e = bbox.max[k] - bbox.min[k];
         if e > 0.0 { cells / e } else { 0.0 }
     });
-    let mut keyed: Vec<(u64, usize)> = points
+    let mut keyed: Vec<(u64, usize)> = ids
         .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
+        .map(|&i| {
             let q = [0, 1, 2].map(|k| {
-                let v = ((p[k] - bbox.min[k]) * scale[k]).clamp(0.0, cells);
+                let v = ((points[i][k] - bbox.min[k]) * scale[k]).clamp(0.0, cells);
                 if v.is_nan() { 0 } else { v as u64 }
             });
             (spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2, i)
         })
         .collect();
     keyed.par_sort_unstable();
-    keyed.into_iter().map(|(_, i)| i).collect()
+    for (id, (_, i)) in ids.iter_mut().zip(keyed) {
+        *id = i;
+    }
 }
 
 /// The low 21 bits of `v` spread to every third bit.
@@ -102,5 +118,12 @@ mod tests {
         );
         assert_eq!(morton_order(&pts), order, "deterministic");
         assert_eq!(morton_order(&[[1.0; 3]; 3]), vec![0, 1, 2], "ties by index");
+        // A subset sorted in place is the order of the subset's own points.
+        let subset: Vec<usize> = (0..pts.len()).filter(|i| i % 3 != 0).collect();
+        let own: Vec<Point3> = subset.iter().map(|&i| pts[i]).collect();
+        let mut ids = subset.clone();
+        sort_by_morton(&pts, &mut ids);
+        let expected: Vec<usize> = morton_order(&own).into_iter().map(|k| subset[k]).collect();
+        assert_eq!(ids, expected);
     }
 }
