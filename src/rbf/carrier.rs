@@ -456,7 +456,7 @@ pub struct LocalCarrier {
     normals: Vec<Point3>,
     /// Each point's curvature correction of its plane ([`quadric`]); empty with planes.
     quadrics: Vec<Quadric>,
-    /// `Plane` or `Quadric`.
+    /// `Plane`, `Quadric` or `WideQuadric` (never `Auto`).
     fit: LocalFit,
     radius: f64,
     index: Arc<dyn SpatialIndex + Send>,
@@ -551,16 +551,11 @@ impl LocalCarrier {
         winding: Option<Arc<WindingGrid>>,
         fit: LocalFit,
     ) -> Self {
-        let (fit, quadrics) = match fit.fit_scale() {
-            None => (LocalFit::Plane, Vec::new()),
-            Some(scale) => (
-                if fit == LocalFit::Auto {
-                    LocalFit::Quadric
-                } else {
-                    fit
-                },
-                quadric::fit_quadrics(&points, &normals, scale * radius, index.as_ref()),
-            ),
+        // `Auto` without a noise estimate is the clean-data choice.
+        let fit = fit.resolve(false);
+        let quadrics = match fit.fit_scale() {
+            None => Vec::new(),
+            Some(scale) => quadric::fit_quadrics(&points, &normals, scale * radius, index.as_ref()),
         };
         LocalCarrier {
             points,
@@ -586,7 +581,7 @@ impl LocalCarrier {
         &self.normals
     }
 
-    /// How each point's term is fitted: `Plane` or `Quadric`.
+    /// How each point's term is fitted: `Plane`, `Quadric` or `WideQuadric`.
     pub fn fit(&self) -> LocalFit {
         self.fit
     }
