@@ -283,6 +283,15 @@ pub struct PolygonizeReport {
     pub small_components_removed: usize,
     /// Triangles in those components.
     pub small_component_triangles: usize,
+    /// Handles cut (`--max-handle-loop`): thin bridges and pinholes of a closed surface.
+    pub handles_removed: usize,
+    /// The longest cut loop, support radii (0 when none was cut).
+    pub handle_loop_max: f64,
+    /// Seconds spent finding and cutting handles (part of `timings_s.polygonize`).
+    pub handles_s: f64,
+    /// Short non-separating loops found but left (the cut would not have given a closed
+    /// manifold one genus lower).
+    pub handles_kept: usize,
     /// Grid cell edge, normalised units.
     pub cell_size: f64,
     /// Triangles before the chord-error simplification.

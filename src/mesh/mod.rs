@@ -13,6 +13,7 @@ pub mod color;
 pub mod compare;
 mod distance;
 pub mod floaters;
+pub mod handles;
 pub mod lod;
 pub mod optimize;
 pub mod simplify;

@@ -29,12 +29,15 @@
 //! border or hole. Every surface then loses its floaters (components carried by fewer than
 //! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
 //! pieces, and is simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology kept).
+//! A closed surface then loses its small handles ([`crate::mesh::handles`]): bridges and pinholes
+//! whose shortest loop around is at most `max_handle_loop` support radii, where two parts came
+//! closer than the data separate them.
 
 use super::FittedField;
 use crate::error::ReconError;
 use crate::geometry::{Aabb, TriMesh, surround_cone};
 use crate::mesh::simplify;
-use crate::mesh::{area, floaters, trim};
+use crate::mesh::{area, floaters, handles, trim};
 use crate::params::{Boundary, ChordTolerance, ReconParams};
 use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
 use crate::progress::{Progress, Stage};
@@ -124,6 +127,18 @@ pub(crate) fn extract_surface(
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
+    if !open && params.max_handle_loop > 0.0 {
+        let t = std::time::Instant::now();
+        let max_loop = params.max_handle_loop * fit.support_radius;
+        let h = handles::remove_small_handles(&mut mesh, max_loop);
+        s.handles_removed = h.removed;
+        s.handles_kept = h.kept;
+        s.handle_loop_max = h
+            .loop_lengths
+            .iter()
+            .fold(0.0, |m, l| m.max(l / fit.support_radius));
+        s.handles_s = t.elapsed().as_secs_f64();
+    }
     Ok((mesh, open, s))
 }
 
