@@ -5,19 +5,25 @@
 //! Where two parts of a surface come closer than the data can separate (a limb beside the body, an
 //! ear beside the head), the zero set can join them with a thin bridge or open a pinhole through a
 //! thin wall: a handle whose shortest non-separating loop is much shorter than any real feature.
-//! Every vertex seeds a geodesic ball (Dijkstra over the edges) of radius `max_loop / 2`. A ball is a
-//! disc (`χ = 1`) on the surface away from handles; one that is not carries cycles, whose generators
-//! come from a tree–cotree split of the ball (the Dijkstra tree; a spanning forest of its triangles
-//! plus one node for everything outside). A generator is a handle loop when cutting the surface along
-//! it leaves it connected (a simple closed curve separates a closed orientable surface exactly when
-//! it bounds). The shortest such loops are cut first: the triangles at the loop's vertices are
-//! removed and each of the two borders left is closed by a fan around its centroid, which lowers
-//! the genus by one. A cut that would not leave exactly two simple borders, or whose result is not
-//! closed, manifold and oriented with the genus one lower, is undone. Real handles longer than
-//! `max_loop` around (a torus's tube, a cup's handle) are never touched.
+//! A surface of genus 0 is left at once. Otherwise the seeds are a geodesic net of spacing
+//! `max_loop / 2`, each growing a geodesic ball (Dijkstra over the edges) of radius `max_loop`, which
+//! holds every loop of length `max_loop` through a vertex within `max_loop / 2` of the seed. A ball
+//! is a disc (`χ = 1`) on the surface away from handles; one that is not carries cycles, whose
+//! generators come from a tree–cotree split of the ball (the Dijkstra tree; a spanning forest of its
+//! triangles plus one node for everything outside, taking the longest fundamental cycles first, so
+//! the generators left are the shortest: Erickson & Whittlesey's greedy system of loops). A
+//! generator is a handle loop when cutting the surface along it leaves it connected (a simple closed
+//! curve separates a closed orientable surface exactly when it bounds). Handle loops are tried
+//! shortest first, each shortened by the same search from the vertices near it, and cut when at
+//! most `max_loop` long: the triangles at the loop's vertices (an annulus) are removed and each of
+//! the two borders left is closed by a fan around its centroid, which lowers the genus by one. The
+//! cuts of a round are checked together (closed, manifold, oriented, genus lower by their number;
+//! else the round is redone one cut at a time), and the input is restored if the final check
+//! fails. Real handles longer than `max_loop` around (a torus's tube, a cup's handle) are never
+//! touched.
 //!
-//! Cost: one ball per vertex, `O(V · b log b)` for balls of `b` vertices (in parallel), plus a cut
-//! test `O(F)` per candidate loop, tried shortest first.
+//! Cost: one ball per net seed, `O(V · b log b / s)` for balls of `b` vertices and `s` vertices per
+//! seed (in parallel), plus a cut test (at most `O(F)`) per candidate loop.
 
 use std::collections::{HashMap, HashSet};
 
