@@ -29,7 +29,7 @@ async fn submit(app: &axum::Router, query: &str, body: Vec<u8>) -> String {
 
 /// Polls until the job reaches `stage` (or ends); returns its state then.
 async fn until_stage(app: &axum::Router, id: &str, stage: &str) -> serde_json::Value {
-    for _ in 0..600 {
+    for _ in 0..1200 {
         let v = get(app, &format!("/v1/reconstructions/{id}")).await.json();
         if v["stage"] == stage || !matches!(v["status"].as_str(), Some("queued" | "running")) {
             return v;
@@ -45,14 +45,21 @@ async fn ended(app: &axum::Router, id: &str, from: Instant) -> (serde_json::Valu
     (v, from.elapsed().as_secs_f64())
 }
 
+/// The two heavy tests of this file take their turns: each allocates hundreds of MB and keeps both
+/// cores busy, and an abandoned factorisation runs on in the background after its job ends.
+static HEAVY: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dense_factorisation_stops_at_the_timeout_and_at_a_cancel() {
-    // 4,500 points → ~9,000 unknowns: the LBLᵀ alone takes several seconds. The cancel runs
-    // first: an abandoned factorisation keeps both cores busy for a while afterwards.
+    let _turn = HEAVY.lock().await;
+    // 4,500 points → ~9,000 unknowns: the LBLᵀ alone takes several seconds (20 s measured on 2
+    // loaded cores). The cancel runs first, on a machine no abandoned factorisation loads yet; the
+    // job has no tight limit, so it surely reaches the factorisation.
     let cloud = sphere_xyz(4500, 21);
     let s = start(|c| c.job_timeout = Duration::from_secs(120));
     let id = submit(&s.app, "method=variational&resolution=16", cloud.clone()).await;
-    until_stage(&s.app, &id, "factor").await;
+    let v = until_stage(&s.app, &id, "factor").await;
+    assert_eq!(v["stage"], "factor", "{v}");
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let t = Instant::now();
     let d = delete(&s.app, &format!("/v1/reconstructions/{id}")).await;
@@ -62,21 +69,40 @@ async fn a_dense_factorisation_stops_at_the_timeout_and_at_a_cancel() {
     assert_eq!(v["status"], "cancelled", "{v}");
     assert!(secs < 3.0, "cancel took {secs} s");
 
-    let s = start(|c| c.job_timeout = Duration::from_secs(3));
-    let id = submit(&s.app, "method=variational&resolution=16", cloud).await;
-    let v = until_stage(&s.app, &id, "factor").await;
-    assert_eq!(v["stage"], "factor", "{v}");
-    let started = Instant::now();
-    let (v, _) = ended(&s.app, &id, started).await;
-    assert_eq!(v["status"], "failed", "{v}");
-    assert_eq!(v["error"]["code"], "job_timeout");
-    let run_s = (v["finished_at"].as_u64().unwrap() - v["started_at"].as_u64().unwrap()) as f64;
-    println!("variational timeout 3 s: the job ran {run_s} s (whole seconds)");
-    assert!(run_s <= 6.0, "ran {run_s} s with a 3 s limit");
+    // The time limit counts from the job's start, so on a loaded machine (the abandoned
+    // factorisation above runs on) the stages before the factorisation may use it up: then the
+    // limit doubles and the job runs again, until one run is stopped inside the factorisation.
+    // Every run must honour its limit.
+    let mut stopped_in_factor = false;
+    for limit in [3u64, 6, 12] {
+        let s = start(|c| c.job_timeout = Duration::from_secs(limit));
+        let id = submit(&s.app, "method=variational&resolution=16", cloud.clone()).await;
+        let (v, _) = ended(&s.app, &id, Instant::now()).await;
+        assert_eq!(v["status"], "failed", "{v}");
+        assert_eq!(v["error"]["code"], "job_timeout", "{v}");
+        let run_s = (v["finished_at"].as_u64().unwrap() - v["started_at"].as_u64().unwrap()) as f64;
+        println!(
+            "variational timeout {limit} s: the job ran {run_s} s (whole seconds), stopped in {}",
+            v["stage"]
+        );
+        assert!(
+            run_s <= (limit + 3) as f64,
+            "ran {run_s} s with a {limit} s limit"
+        );
+        if v["stage"] == "factor" {
+            stopped_in_factor = true;
+            break;
+        }
+    }
+    assert!(
+        stopped_in_factor,
+        "no run reached the factorisation before its limit"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_large_support_assembly_stops_at_a_cancel() {
+    let _turn = HEAVY.lock().await;
     let s = start(|c| c.job_timeout = Duration::from_secs(120));
     // 30,000 points with R = 0.25: thousands of neighbours per point, a long assembly.
     let id = submit(&s.app, "support=0.25&resolution=16", sphere_xyz(30_000, 22)).await;
