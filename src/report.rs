@@ -287,7 +287,8 @@ pub struct PolygonizeReport {
     pub handles_removed: usize,
     /// The longest cut loop, support radii (0 when none was cut).
     pub handle_loop_max: f64,
-    /// Seconds spent finding and cutting handles (part of `timings_s.polygonize`).
+    /// Seconds spent finding and cutting handles (part of `timings_s.polygonize`; of
+    /// `timings_s.post` out of core).
     pub handles_s: f64,
     /// Short non-separating loops found but left (the cut would not have given a closed
     /// manifold one genus lower).

@@ -127,19 +127,30 @@ pub(crate) fn extract_surface(
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
-    if !open && params.max_handle_loop > 0.0 {
-        let t = std::time::Instant::now();
-        let max_loop = params.max_handle_loop * fit.support_radius;
-        let h = handles::remove_small_handles(&mut mesh, max_loop);
-        s.handles_removed = h.removed;
-        s.handles_kept = h.kept;
-        s.handle_loop_max = h
-            .loop_lengths
-            .iter()
-            .fold(0.0, |m, l| m.max(l / fit.support_radius));
-        s.handles_s = t.elapsed().as_secs_f64();
+    if !open {
+        cut_small_handles(&mut mesh, params, fit.support_radius, &mut s);
     }
     Ok((mesh, open, s))
+}
+
+/// Cuts the closed `mesh`'s handles whose shortest loop is at most `params.max_handle_loop`
+/// support radii (`support_radius`, the mesh's units; nothing when the parameter is 0) and records
+/// them in the report: the last step on a closed surface, in memory and out of core alike.
+pub(crate) fn cut_small_handles(
+    mesh: &mut TriMesh,
+    params: &ReconParams,
+    support_radius: f64,
+    s: &mut PolygonizeReport,
+) {
+    if params.max_handle_loop <= 0.0 {
+        return;
+    }
+    let t = std::time::Instant::now();
+    let h = handles::remove_small_handles(mesh, params.max_handle_loop * support_radius);
+    s.handles_removed = h.removed;
+    s.handles_kept = h.kept;
+    s.handle_loop_max = (h.loop_lengths.iter()).fold(0.0, |m, l| m.max(l / support_radius));
+    s.handles_s = t.elapsed().as_secs_f64();
 }
 
 /// Whether the data surround the object (the surface is then closed, and the coarse pass not

@@ -320,3 +320,39 @@ fn the_shipped_scans_get_the_in_memory_support_noise_and_surface_through_the_str
         assert!(d.chamfer_rel < 1e-3, "{name}: {d:?}");
     }
 }
+
+#[test]
+fn the_tiled_path_cuts_small_handles_like_the_in_memory_one() {
+    // A torus whose meridian (2π · 0.03 ≈ 0.19) is shorter than 4 support radii of a 1,000-point
+    // sample (R ≈ 0.06) but longer than the default 2: cut at 4, kept by default.
+    let shape = Shape::Torus {
+        center: [0.5; 3],
+        major: 0.3,
+        minor: 0.03,
+    };
+    let cloud = shape.sample(1000, 41);
+    for (max_handle_loop, genus, cut) in
+        [(4.0, 0, 1), (ReconParams::default().max_handle_loop, 1, 0)]
+    {
+        let params = ReconParams {
+            max_handle_loop,
+            ..Default::default()
+        };
+        let tiled = reconstruct_tiled(
+            cloud.clone(),
+            &params,
+            &options(StoreKind::Memory, 16, 2),
+            &NoProgress,
+        )
+        .unwrap();
+        let in_memory = rbfsurf::reconstruct(&cloud, &params, &NoProgress).unwrap();
+        for r in [&tiled.report, &in_memory.report] {
+            let m = &r.mesh;
+            assert!(m.watertight && m.manifold && m.components == 1, "{m:?}");
+            assert_eq!(m.genus, Some(genus), "max_handle_loop {max_handle_loop}");
+            assert_eq!(r.polygonize.handles_removed, cut, "{:?}", r.polygonize);
+        }
+        let loop_r = tiled.report.polygonize.handle_loop_max;
+        assert!(cut == 0 || (2.0..=4.0).contains(&loop_r), "loop {loop_r} R");
+    }
+}

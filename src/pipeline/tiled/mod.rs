@@ -402,7 +402,8 @@ pub(crate) fn finish(
     Ok(super::Reconstruction { mesh, report })
 }
 
-/// Floaters (support counted on the subsample), small pieces, back to input units, GPU order.
+/// Floaters (support counted on the subsample), small pieces, small handles, back to input units,
+/// GPU order.
 fn post(plan: &Plan, mut mesh: TriMesh, s: &mut PolygonizeReport) -> Result<TriMesh, ReconError> {
     use crate::mesh::{floaters, trim};
     let params = &plan.params;
@@ -413,6 +414,7 @@ fn post(plan: &Plan, mut mesh: TriMesh, s: &mut PolygonizeReport) -> Result<TriM
     let (drop, n) = trim::small_components(&mesh, params.min_component);
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
+    super::surface::cut_small_handles(&mut mesh, params, plan.support.radius, s);
     for v in &mut mesh.vertices {
         *v = plan.normalization.inverse(v);
     }
