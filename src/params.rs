@@ -360,8 +360,8 @@ pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.
 /// `min-support`: [0, 0.5].
 pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5));
 /// `max-handle-loop`: [0, 4] support radii. Real handles can be that short (the elephant's trunk
-/// and legs: 3.5 R on a 10k sample), and the search costs about the fourth power of the length
-/// (man 26k: 1.3 s at 2 R, 15 s at 4 R, 196 s at 8 R).
+/// and legs: 3.5 R on a 10k sample), and the search's cost grows steeply with the length (man 26k
+/// `x y z`, idle: 0.9 s at 2 R, 8.3 s at 4 R, 93 s at 8 R).
 pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Some(4.0));
 /// Default `max-handle-loop`, support radii: the spurious handles of 10k-point statue samples
 /// measured 0.1–2.0 R; the real ones measured 3.5 R and more (the elephant's).
