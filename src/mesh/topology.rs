@@ -88,10 +88,11 @@ impl UnionFind {
         x
     }
 
-    pub(crate) fn union(&mut self, a: u32, b: u32) {
+    /// Joins the sets of `a` and `b`; false when they were one already.
+    pub(crate) fn union(&mut self, a: u32, b: u32) -> bool {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra == rb {
-            return;
+            return false;
         }
         let (big, small) = if self.size[ra as usize] >= self.size[rb as usize] {
             (ra, rb)
@@ -100,6 +101,7 @@ impl UnionFind {
         };
         self.parent[small as usize] = big;
         self.size[big as usize] += self.size[small as usize];
+        true
     }
 }
 

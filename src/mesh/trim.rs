@@ -52,7 +52,9 @@ pub fn keep_enclosed_holes(mesh: &TriMesh, drop: &mut [bool]) -> usize {
         match &half[i..j] {
             [(_, a)] => border.push(*a),
             [(_, a), (_, b)] => match (drop[*a as usize], drop[*b as usize]) {
-                (true, true) => uf.union(*a, *b),
+                (true, true) => {
+                    uf.union(*a, *b);
+                }
                 (true, false) => pairs.push((*a, *b)),
                 (false, true) => pairs.push((*b, *a)),
                 (false, false) => {}

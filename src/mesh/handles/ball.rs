@@ -6,6 +6,7 @@ use std::collections::{BinaryHeap, HashMap, HashSet};
 
 use super::{Adjacency, Loop};
 use crate::geometry::{TriMesh, dist2};
+use crate::mesh::topology::UnionFind;
 
 /// Per-thread buffers of the geodesic balls.
 pub(super) struct Ball {
@@ -146,7 +147,7 @@ impl Ball {
             return Vec::new(); // a disc (or a whole sphere)
         }
         let outside = self.tris.len();
-        let mut sets = Dsu::new(outside + 1);
+        let mut sets = UnionFind::new(outside + 1);
         // Greedy system of loops (Erickson & Whittlesey 2005): the cotree takes the non-tree edges
         // with the longest fundamental cycles first, so the generators left are the shortest.
         let p = &mesh.vertices;
@@ -172,8 +173,8 @@ impl Ball {
                 continue;
             };
             let id = |t: u32| match self.local[t as usize] {
-                u32::MAX => outside,
-                l => l as usize,
+                u32::MAX => outside as u32,
+                l => l,
             };
             if !sets.union(id(t0), id(t1)) {
                 generators.push((u, w));
@@ -216,30 +217,6 @@ impl Ball {
             .map(|i| dist2(p[vertices[i] as usize], p[vertices[(i + 1) % m] as usize]).sqrt())
             .sum();
         Some(Loop { length, vertices })
-    }
-}
-
-/// Disjoint sets with path halving.
-pub(super) struct Dsu(Vec<usize>);
-impl Dsu {
-    pub(super) fn new(n: usize) -> Dsu {
-        Dsu((0..n).collect())
-    }
-    fn find(&mut self, mut x: usize) -> usize {
-        while self.0[x] != x {
-            self.0[x] = self.0[self.0[x]];
-            x = self.0[x];
-        }
-        x
-    }
-    /// Joins the sets of `a` and `b`; false when they were one already.
-    pub(super) fn union(&mut self, a: usize, b: usize) -> bool {
-        let (a, b) = (self.find(a), self.find(b));
-        if a == b {
-            return false;
-        }
-        self.0[a.max(b)] = a.min(b);
-        true
     }
 }
 
