@@ -1,8 +1,11 @@
 //! The block-decomposed CSRBF fit ([`crate::rbf::pou`]): plan octree blocks with overlap, then fit
-//! each block's (single- or multi-level) spline to its points' carrier offsets, one block after the
-//! other so only one block's matrix and factor are alive at a time (memory bounded by the largest
-//! block, not by `n`). Each block is an independent unit of work: (points, offsets, parameters) in,
-//! spline out.
+//! each block's (single- or multi-level) spline to its points' carrier offsets, in waves of
+//! [`concurrent_blocks`] blocks (one per thread, at most [`MAX_CONCURRENT`]; one when the memory
+//! budget cannot hold two) so that only that many
+//! blocks' matrices and factors are alive at a time (memory bounded by the largest blocks, not by
+//! `n`), while a block's serial steps (its index, its ordering) overlap another block's parallel
+//! ones. Each block is an independent unit of work: (points, offsets, parameters) in, spline out;
+//! the splines do not depend on the wave size.
 
 use super::check_cancel;
 use super::csrbf::fit_levels;
@@ -13,7 +16,16 @@ use crate::progress::Progress;
 use crate::rbf::{PouBlock, SupportEstimate, plan_blocks, plan_levels};
 use crate::report::{LevelReport, MatrixReport, Timings};
 use crate::spatial::{SpatialIndex, build_index};
+use rayon::prelude::*;
 use std::sync::Arc;
+
+/// Most blocks fitted at once.
+pub(crate) const MAX_CONCURRENT: usize = 2;
+
+/// Blocks fitted at once on the current thread pool: one per thread, at most [`MAX_CONCURRENT`].
+pub(crate) fn concurrent_blocks() -> usize {
+    rayon::current_num_threads().clamp(1, MAX_CONCURRENT)
+}
 
 /// Forwards cancellation only: a block's inner stages would reset the outer stage's fraction.
 struct Quiet<'a>(&'a dyn Progress);
@@ -26,8 +38,9 @@ impl Progress for Quiet<'_> {
     }
 }
 
-/// Fit `levels` levels in blocks of at most `max_points` core points (normalised units; `rhs` are
-/// the carrier offsets `−g(P_i)`). The overlap is three coarsest support radii: at least one for a
+/// Fit `levels` levels in blocks of at most `max_points` core points, `wave` blocks at a time
+/// (normalised units; `rhs` are the carrier offsets `−g(P_i)`); the stage times of the blocks are
+/// summed (with waves of two they can add up to more than the stage's wall time). The overlap is three coarsest support radii: at least one for a
 /// continuous blend (see [`crate::rbf::pou`]), the rest so the truncation of a block's system at
 /// its outer box has decayed where its weight is large. Stage `blocks`.
 #[allow(clippy::too_many_arguments)]
@@ -36,7 +49,7 @@ pub(crate) fn fit_blocks(
     rhs: &[f64],
     support: &SupportEstimate,
     levels: usize,
-    max_points: usize,
+    (max_points, wave): (usize, usize),
     params: &ReconParams,
     progress: &dyn Progress,
     timings: &mut Timings,
@@ -48,30 +61,69 @@ pub(crate) fn fit_blocks(
     let quiet = Quiet(progress);
     let mut blocks = Vec::with_capacity(plans.len());
     let mut report = MatrixReport::default();
-    for (k, plan) in plans.iter().enumerate() {
+    let wave = wave.max(1);
+    for (w, group) in plans.chunks(wave).enumerate() {
         check_cancel(progress)?;
-        let pts: Vec<Point3> = plan.members.iter().map(|&i| points[i as usize]).collect();
-        let target: Vec<f64> = plan.members.iter().map(|&i| rhs[i as usize]).collect();
-        let index: Arc<dyn SpatialIndex + Send> =
-            Arc::from(build_index(&pts, params.index, params.leaf_size)?);
-        let level_plans = plan_levels(
-            &pts,
-            index.as_ref(),
-            support.radius,
-            support.mean_neighbours,
-            levels,
-        );
-        let (spline, r) = fit_levels(&pts, &index, &level_plans, target, params, &quiet, timings)?;
-        merge_report(&mut report, r);
-        blocks.push(PouBlock {
-            core: plan.core,
-            outer: plan.outer,
-            spline,
-        });
-        progress.fraction((k + 1) as f64 / plans.len() as f64);
+        let fitted: Vec<Result<(PouBlock, MatrixReport, Timings), ReconError>> = group
+            .par_iter()
+            .map(|plan| fit_block(points, rhs, support, levels, plan, params, &quiet))
+            .collect();
+        for f in fitted {
+            let (block, r, t) = f?;
+            merge_report(&mut report, r);
+            for (total, part) in [
+                (&mut timings.assemble, t.assemble),
+                (&mut timings.order, t.order),
+                (&mut timings.factor, t.factor),
+                (&mut timings.solve, t.solve),
+            ] {
+                *total += part;
+            }
+            blocks.push(block);
+        }
+        progress.fraction(((w * wave + group.len()) as f64 / plans.len() as f64).min(1.0));
     }
     report.blocks = blocks.len();
     Ok((blocks, report))
+}
+
+/// Fit one planned block; its stage times in the returned [`Timings`].
+fn fit_block(
+    points: &[Point3],
+    rhs: &[f64],
+    support: &SupportEstimate,
+    levels: usize,
+    plan: &crate::rbf::BlockPlan,
+    params: &ReconParams,
+    quiet: &Quiet,
+) -> Result<(PouBlock, MatrixReport, Timings), ReconError> {
+    let pts: Vec<Point3> = plan.members.iter().map(|&i| points[i as usize]).collect();
+    let target: Vec<f64> = plan.members.iter().map(|&i| rhs[i as usize]).collect();
+    let index: Arc<dyn SpatialIndex + Send> =
+        Arc::from(build_index(&pts, params.index, params.leaf_size)?);
+    let level_plans = plan_levels(
+        &pts,
+        index.as_ref(),
+        support.radius,
+        support.mean_neighbours,
+        levels,
+    );
+    let mut timings = Timings::default();
+    let (spline, r) = fit_levels(
+        &pts,
+        &index,
+        &level_plans,
+        target,
+        params,
+        quiet,
+        &mut timings,
+    )?;
+    let block = PouBlock {
+        core: plan.core,
+        outer: plan.outer,
+        spline,
+    };
+    Ok((block, r, timings))
 }
 
 /// Sum a block's systems into the total: sizes add up, bandwidth is the largest, levels merge by

@@ -1,6 +1,6 @@
 //! The CSRBF fit (the seed's method): index → support → carrier → assemble → order → factor → solve.
 
-use super::{FittedField, check_cancel, clean_and_normalize, residual_at};
+use super::{FittedField, check_cancel, clean_and_normalize};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, PointCloud};
 use crate::linalg::{SolverKind, SolverParams, factorize_owned, solve_bordered};
@@ -44,12 +44,7 @@ pub fn fit_field(
     let resolved = params.resolved_for(&noise);
     let params = &resolved;
     let count = params.levels;
-    // With blocks only one block's system is alive at a time (core plus overlap: ~1.5× its core).
-    let alive = params
-        .blocks
-        .max_points(points.len())
-        .map_or(1.0, |m| (1.5 * m as f64 / points.len() as f64).min(1.0));
-    check_memory(&support, points.len(), alive, count, params.max_memory_mib)?;
+    let wave = block_wave(&support, points.len(), count, params)?;
     timings.index = t.elapsed().as_secs_f64();
 
     progress.stage(crate::progress::Stage::Carrier);
@@ -61,10 +56,8 @@ pub fn fit_field(
         support.radius,
         &index,
     )?;
-    let rhs: Vec<f64> = carrier_values(&carrier, &points)
-        .iter()
-        .map(|v| -v)
-        .collect();
+    let carrier_at = carrier_values(&carrier, &points);
+    let rhs: Vec<f64> = carrier_at.iter().map(|v| -v).collect();
     timings.carrier = t.elapsed().as_secs_f64();
     check_cancel(progress)?;
 
@@ -83,7 +76,14 @@ pub fn fit_field(
         }
         Some(max_points) => {
             let (blocks, matrix) = super::blocks::fit_blocks(
-                &points, &rhs, &support, count, max_points, params, progress, timings,
+                &points,
+                &rhs,
+                &support,
+                count,
+                (max_points, wave),
+                params,
+                progress,
+                timings,
             )?;
             (Correction::Blocks(blocks), matrix)
         }
@@ -107,7 +107,7 @@ pub fn fit_field(
         finest_support: support.radius,
     });
     let t = Instant::now();
-    let residual = residual_at(field.as_ref(), &points, progress)?;
+    let residual = super::residual_with_carrier(field.as_ref(), &points, &carrier_at, progress)?;
     timings.residual = t.elapsed().as_secs_f64();
     Ok(FittedField {
         far_field,
@@ -188,7 +188,7 @@ pub(crate) fn carrier_values(carrier: &Carrier, points: &[Point3]) -> Vec<f64> {
     let Carrier::Local(l) = carrier else {
         return points.par_iter().map(|p| carrier.value(p)).collect();
     };
-    super::per_bucket(points, CARRIER_BUCKET, |pts| {
+    super::per_bucket(points, CARRIER_BUCKET, |_, pts| {
         let mut near = crate::rbf::carrier::NearPoints::new();
         l.gather(&Aabb::from_points(pts), &mut near);
         pts.iter().map(|p| l.value_near(p, &mut near)).collect()
@@ -414,6 +414,29 @@ fn estimate_missing_normals(
 /// With several levels the matrices hold about 4/3 of the finest level's values in all (levels
 /// are fitted one after the other, so only one is alive at a time; the bound is conservative).
 /// `alive` is the share of the points whose system is in memory at once (1 without blocks).
+/// Blocks fitted at once ([`super::blocks::concurrent_blocks`], or one when two would not fit
+/// `--max-memory-mib`), after checking that the systems alive at once fit it: the whole system,
+/// or with blocks one wave of them (each core plus overlap: ~1.5× its core).
+fn block_wave(
+    support: &SupportEstimate,
+    n: usize,
+    levels: usize,
+    params: &ReconParams,
+) -> Result<usize, RbfError> {
+    let alive = |wave: usize| {
+        (params.blocks.max_points(n))
+            .map_or(1.0, |m| (wave as f64 * 1.5 * m as f64 / n as f64).min(1.0))
+    };
+    let fits = |wave| check_memory(support, n, alive(wave), levels, params.max_memory_mib);
+    let wave = super::blocks::concurrent_blocks();
+    if wave > 1 && fits(wave).is_err() {
+        fits(1)?;
+        return Ok(1);
+    }
+    fits(wave)?;
+    Ok(wave)
+}
+
 fn check_memory(
     s: &SupportEstimate,
     n: usize,

@@ -382,7 +382,7 @@ pub fn residual_at(
     points: &[Point3],
     progress: &dyn Progress,
 ) -> Result<ResidualReport, ReconError> {
-    let mut abs = per_bucket(points, RESIDUAL_BUCKET, |pts| {
+    let abs = per_bucket(points, RESIDUAL_BUCKET, |_, pts| {
         let mut out = vec![0.0; pts.len()];
         if !progress.cancelled() {
             field.values_in(&Aabb::from_points(pts), pts, &mut out);
@@ -390,26 +390,60 @@ pub fn residual_at(
         out
     });
     check_cancel(progress)?;
+    Ok(residual_report(abs))
+}
+
+/// [`residual_at`] for a CSRBF field whose carrier values at the points are known
+/// (`carrier[i] = g(P_i)`, from the carrier stage): only the spline part is evaluated and the
+/// carrier's value added, the same sum in the same order, so the same bits.
+pub(crate) fn residual_with_carrier(
+    field: &crate::rbf::RbfField,
+    points: &[Point3],
+    carrier: &[f64],
+    progress: &dyn Progress,
+) -> Result<ResidualReport, ReconError> {
+    let abs = per_bucket(points, RESIDUAL_BUCKET, |ids, pts| {
+        let mut out = vec![0.0; pts.len()];
+        if !progress.cancelled() {
+            field.correction_values_in(&Aabb::from_points(pts), pts, &mut out);
+            for (o, &i) in out.iter_mut().zip(ids) {
+                *o += carrier[i as usize];
+            }
+        }
+        out
+    });
+    check_cancel(progress)?;
+    Ok(residual_report(abs))
+}
+
+/// RMS and max of the values' magnitudes, summed in point order.
+fn residual_report(mut abs: Vec<f64>) -> ResidualReport {
     for v in &mut abs {
         *v = v.abs();
     }
     let sum2: f64 = abs.iter().map(|v| v * v).sum();
-    Ok(ResidualReport {
-        rms: (sum2 / points.len().max(1) as f64).sqrt(),
+    ResidualReport {
+        rms: (sum2 / abs.len().max(1) as f64).sqrt(),
         max: abs.iter().fold(0.0f64, |m, &v| m.max(v)),
-    })
+    }
 }
 
-/// `eval` of each bucket of about `per` nearby points ([`spatial_buckets`]), in parallel, as one
-/// value per point in the input order: for evaluations that gather their data once per small box.
+/// `eval(ids, points)` of each bucket of about `per` nearby points
+/// ([`spatial_buckets`]), in parallel, as one value per point in the input order:
+/// for evaluations that gather their data once per small box.
 pub(crate) fn per_bucket(
     points: &[Point3],
     per: usize,
-    eval: impl Fn(&[Point3]) -> Vec<f64> + Sync,
+    eval: impl Fn(&[u32], &[Point3]) -> Vec<f64> + Sync,
 ) -> Vec<f64> {
     let buckets = spatial_buckets(points, per);
     let values: Vec<Vec<f64>> = (buckets.par_iter())
-        .map(|ids| eval(&ids.iter().map(|&i| points[i as usize]).collect::<Vec<_>>()))
+        .map(|ids| {
+            eval(
+                ids,
+                &ids.iter().map(|&i| points[i as usize]).collect::<Vec<_>>(),
+            )
+        })
         .collect();
     let mut out = vec![0.0; points.len()];
     for (ids, v) in buckets.iter().zip(values) {

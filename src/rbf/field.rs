@@ -304,6 +304,13 @@ impl RbfField {
         }
     }
 
+    /// The spline part alone (every level; blocks blended) at `points`, all in `region`: the
+    /// value [`ScalarField::values_in`] gives minus the carrier's (the full value is this plus the
+    /// carrier's, summed in that order), gathered once per part of the region.
+    pub fn correction_values_in(&self, region: &Aabb, points: &[Point3], out: &mut [f64]) {
+        super::region::PreparedRegion::correction_only(self, region).values(points, out);
+    }
+
     /// Carrier plus every level but the finest (the smooth far field).
     fn coarse_value(&self, x: &Point3, hits: &mut Vec<u32>) -> f64 {
         let upto = match &self.correction {

@@ -66,6 +66,8 @@ pub(super) struct PreparedRegion<'a> {
     parts: Vec<Option<Gathered>>,
     hits: Vec<u32>,
     d2: Vec<f64>,
+    /// Whether the values include the carrier (else the spline part alone).
+    with_carrier: bool,
 }
 
 impl<'a> PreparedRegion<'a> {
@@ -96,6 +98,16 @@ impl<'a> PreparedRegion<'a> {
             parts: (0..split * split * split).map(|_| None).collect(),
             hits: Vec::new(),
             d2: Vec::new(),
+            with_carrier: true,
+        }
+    }
+
+    /// The spline part alone (blocks blended), without the carrier: nothing of the carrier is
+    /// gathered or evaluated. Gradients are not available (they panic).
+    pub(super) fn correction_only(field: &'a RbfField, region: &Aabb) -> Self {
+        PreparedRegion {
+            with_carrier: false,
+            ..Self::new(field, region)
         }
     }
 
@@ -169,7 +181,7 @@ impl<'a> PreparedRegion<'a> {
         }
         let bx = self.part_box(k);
         let near = match &self.field.carrier {
-            Carrier::Local(l) => {
+            Carrier::Local(l) if self.with_carrier => {
                 let mut near = NearPoints::new();
                 l.gather(&bx, &mut near);
                 Some(near)
@@ -186,6 +198,9 @@ impl<'a> PreparedRegion<'a> {
     fn single_value(&mut self, x: &Point3) -> f64 {
         let (f, hits) = (self.field, &mut self.hits);
         let v = blend(&self.splines, x, |s, _| s.value_sorted(f.kernel, x, hits));
+        if !self.with_carrier {
+            return v;
+        }
         v + match &f.carrier {
             // Outside any gathered region: a sorted radius query, as a tile's list sums.
             Carrier::Local(l) => l.value_near(x, &mut NearPoints::new()),
@@ -254,6 +269,9 @@ impl RegionField for PreparedRegion<'_> {
             *o = blend(&self.splines, p, |s, i| {
                 s.value_from(&lists[i], f.kernel, p, d2)
             });
+            if !self.with_carrier {
+                continue;
+            }
             *o += match (&f.carrier, &mut part.near) {
                 (Carrier::Local(l), Some(near)) => l.value_near(p, near),
                 (carrier, _) => carrier.value(p),
@@ -262,6 +280,7 @@ impl RegionField for PreparedRegion<'_> {
     }
 
     fn gradients(&mut self, points: &[Point3], out: &mut [Point3]) {
+        assert!(self.with_carrier, "gradients of the spline part alone");
         self.gather_busy_parts(points);
         let f = self.field;
         for (p, o) in points.iter().zip(out.iter_mut()) {

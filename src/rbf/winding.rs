@@ -275,15 +275,26 @@ impl DipoleTree {
                 | ((p[1] > mid[1]) as usize) << 1
                 | ((p[2] > mid[2]) as usize) << 2
         };
+        // A stable counting partition by octant (what a stable sort by octant gives, in O(n)).
         let sub = &mut order[range.clone()];
-        sub.sort_by_key(|&i| octant(&points[i]));
+        let keys: Vec<u8> = sub.iter().map(|&i| octant(&points[i]) as u8).collect();
+        let mut counts = [0usize; 8];
+        for &k in &keys {
+            counts[k as usize] += 1;
+        }
+        let mut at = [0usize; 8];
+        for o in 1..8 {
+            at[o] = at[o - 1] + counts[o - 1];
+        }
+        let mut sorted = vec![0usize; sub.len()];
+        for (&i, &k) in sub.iter().zip(&keys) {
+            sorted[at[k as usize]] = i;
+            at[k as usize] += 1;
+        }
+        sub.copy_from_slice(&sorted);
         let mut start = range.start;
         let mut children = Vec::new();
-        for o in 0..8 {
-            let len = order[start..range.end]
-                .iter()
-                .take_while(|&&i| octant(&points[i]) == o)
-                .count();
+        for &len in &counts {
             if len > 0 {
                 children.push(self.split(
                     points,
