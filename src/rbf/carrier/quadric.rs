@@ -112,6 +112,16 @@ const MAX_TILT: f64 = 1.0;
 /// (radius of curvature `R/8` over R: not resolvable by points spaced about `R/3`; `R/2` for the
 /// wide fits over 2R, which are meant to smooth).
 const MAX_CURVATURE: f64 = 4.0;
+/// `MONOMIAL[a][b]`: the moment of `φ_a φ_b` (basis `1, u, v, u², uv, v²`) among the 15 monomials
+/// `1, u, v, u², uv, v², u³, u²v, uv², v³, u⁴, u³v, u²v², uv³, v⁴`.
+const MONOMIAL: [[usize; 6]; 6] = [
+    [0, 1, 2, 3, 4, 5],
+    [1, 3, 4, 6, 7, 8],
+    [2, 4, 5, 7, 8, 9],
+    [3, 6, 7, 10, 11, 12],
+    [4, 7, 8, 11, 12, 13],
+    [5, 8, 9, 12, 13, 14],
+];
 /// Ridge on the quadratic coefficients, relative to the total weight.
 const RIDGE: f64 = 1e-3;
 
@@ -222,7 +232,9 @@ fn fit_one(
     let (p, n) = (points[j], normals[j]);
     let (t1, t2) = frame(n);
     let inv_r = 1.0 / radius;
-    let mut m = [[0.0f64; 6]; 6];
+    // The normal equations from weighted moments: `mo[k]` = Σ ω u^a v^b for the 15 monomials of
+    // degree ≤ 4 (see `MONOMIAL`), `rhs` = Σ ω w φ for the basis `φ = (1, u, v, u², uv, v²)`.
+    let mut mo = [0.0f64; 15];
     let mut rhs = [0.0f64; 6];
     let (mut count, mut total) = (0usize, 0.0);
     for &k in hits {
@@ -237,13 +249,31 @@ fn fit_one(
         if omega <= 0.0 {
             continue;
         }
-        let phi = [1.0, u, v, u * u, u * v, v * v];
-        for a in 0..6 {
-            let wa = omega * phi[a];
-            rhs[a] += wa * w;
-            for b in a..6 {
-                m[a][b] += wa * phi[b];
-            }
+        let (a1u, a1v) = (omega * u, omega * v);
+        let (a2uu, a2uv, a2vv) = (a1u * u, a1u * v, a1v * v);
+        let (a3uuu, a3uuv, a3uvv, a3vvv) = (a2uu * u, a2uu * v, a2uv * v, a2vv * v);
+        let terms = [
+            omega,
+            a1u,
+            a1v,
+            a2uu,
+            a2uv,
+            a2vv,
+            a3uuu,
+            a3uuv,
+            a3uvv,
+            a3vvv,
+            a3uuu * u,
+            a3uuu * v,
+            a3uuv * v,
+            a3uvv * v,
+            a3vvv * v,
+        ];
+        for (m, t) in mo.iter_mut().zip(terms) {
+            *m += t;
+        }
+        for (r, t) in rhs.iter_mut().zip(&terms[..6]) {
+            *r += t * w;
         }
         count += 1;
         total += omega;
@@ -251,9 +281,10 @@ fn fit_one(
     if count < MIN_POINTS {
         return None;
     }
+    let mut m = [[0.0f64; 6]; 6];
     for a in 0..6 {
-        for b in 0..a {
-            m[a][b] = m[b][a];
+        for b in 0..6 {
+            m[a][b] = mo[MONOMIAL[a][b]];
         }
         if a >= 3 {
             m[a][a] += RIDGE * total;
