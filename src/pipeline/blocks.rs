@@ -1,11 +1,10 @@
 //! The block-decomposed CSRBF fit ([`crate::rbf::pou`]): plan octree blocks with overlap, then fit
 //! each block's (single- or multi-level) spline to its points' carrier offsets, in waves of
 //! [`concurrent_blocks`] blocks (one per thread, at most [`MAX_CONCURRENT`]; one when the memory
-//! budget cannot hold two) so that only that many
-//! blocks' matrices and factors are alive at a time (memory bounded by the largest blocks, not by
-//! `n`), while a block's serial steps (its index, its ordering) overlap another block's parallel
-//! ones. Each block is an independent unit of work: (points, offsets, parameters) in, spline out;
-//! the splines do not depend on the wave size.
+//! budget cannot hold two), so only that many blocks' matrices and factors are alive at a time
+//! (memory bounded by the largest blocks, not by `n`) and one block's serial steps (its index, its
+//! ordering) overlap another's parallel ones. Each block is an independent unit of work: (points,
+//! offsets, parameters) in, spline out; the splines do not depend on the wave size.
 
 use super::check_cancel;
 use super::csrbf::fit_levels;
@@ -20,7 +19,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Most blocks fitted at once.
-pub(crate) const MAX_CONCURRENT: usize = 2;
+const MAX_CONCURRENT: usize = 2;
 
 /// Blocks fitted at once on the current thread pool: one per thread, at most [`MAX_CONCURRENT`].
 pub(crate) fn concurrent_blocks() -> usize {
@@ -39,10 +38,11 @@ impl Progress for Quiet<'_> {
 }
 
 /// Fit `levels` levels in blocks of at most `max_points` core points, `wave` blocks at a time
-/// (normalised units; `rhs` are the carrier offsets `−g(P_i)`); the stage times of the blocks are
-/// summed (with waves of two they can add up to more than the stage's wall time). The overlap is three coarsest support radii: at least one for a
-/// continuous blend (see [`crate::rbf::pou`]), the rest so the truncation of a block's system at
-/// its outer box has decayed where its weight is large. Stage `blocks`.
+/// (normalised units; `rhs` are the carrier offsets `−g(P_i)`); the blocks' stage times are summed
+/// (with waves of two they can add up to more than the stage's wall time). The overlap is three
+/// coarsest support radii: at least one for a continuous blend (see [`crate::rbf::pou`]), the rest
+/// so the truncation of a block's system at its outer box has decayed where its weight is large.
+/// Stage `blocks`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fit_blocks(
     points: &[Point3],

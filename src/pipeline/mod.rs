@@ -382,15 +382,9 @@ pub fn residual_at(
     points: &[Point3],
     progress: &dyn Progress,
 ) -> Result<ResidualReport, ReconError> {
-    let abs = per_bucket(points, RESIDUAL_BUCKET, |_, pts| {
-        let mut out = vec![0.0; pts.len()];
-        if !progress.cancelled() {
-            field.values_in(&Aabb::from_points(pts), pts, &mut out);
-        }
-        out
-    });
-    check_cancel(progress)?;
-    Ok(residual_report(abs))
+    residual_in_buckets(points, progress, |_, pts, out| {
+        field.values_in(&Aabb::from_points(pts), pts, out)
+    })
 }
 
 /// [`residual_at`] for a CSRBF field whose carrier values at the points are known
@@ -402,35 +396,42 @@ pub(crate) fn residual_with_carrier(
     carrier: &[f64],
     progress: &dyn Progress,
 ) -> Result<ResidualReport, ReconError> {
-    let abs = per_bucket(points, RESIDUAL_BUCKET, |ids, pts| {
+    residual_in_buckets(points, progress, |ids, pts, out| {
+        field.correction_values_in(&Aabb::from_points(pts), pts, out);
+        for (o, &i) in out.iter_mut().zip(ids) {
+            *o += carrier[i as usize];
+        }
+    })
+}
+
+/// RMS and max of `|f(P_i)|`, `eval(ids, points, out)` writing `f` of one bucket's points (see
+/// [`residual_at`]); magnitudes summed in point order.
+fn residual_in_buckets(
+    points: &[Point3],
+    progress: &dyn Progress,
+    eval: impl Fn(&[u32], &[Point3], &mut [f64]) + Sync,
+) -> Result<ResidualReport, ReconError> {
+    let mut abs = per_bucket(points, RESIDUAL_BUCKET, |ids, pts| {
         let mut out = vec![0.0; pts.len()];
         if !progress.cancelled() {
-            field.correction_values_in(&Aabb::from_points(pts), pts, &mut out);
-            for (o, &i) in out.iter_mut().zip(ids) {
-                *o += carrier[i as usize];
-            }
+            eval(ids, pts, &mut out);
         }
         out
     });
     check_cancel(progress)?;
-    Ok(residual_report(abs))
-}
-
-/// RMS and max of the values' magnitudes, summed in point order.
-fn residual_report(mut abs: Vec<f64>) -> ResidualReport {
     for v in &mut abs {
         *v = v.abs();
     }
     let sum2: f64 = abs.iter().map(|v| v * v).sum();
-    ResidualReport {
-        rms: (sum2 / abs.len().max(1) as f64).sqrt(),
+    Ok(ResidualReport {
+        rms: (sum2 / points.len().max(1) as f64).sqrt(),
         max: abs.iter().fold(0.0f64, |m, &v| m.max(v)),
-    }
+    })
 }
 
-/// `eval(ids, points)` of each bucket of about `per` nearby points
-/// ([`spatial_buckets`]), in parallel, as one value per point in the input order:
-/// for evaluations that gather their data once per small box.
+/// `eval(ids, points)` of each bucket of about `per` nearby points ([`spatial_buckets`]), in
+/// parallel, as one value per point in the input order: for evaluations that gather their data
+/// once per small box.
 pub(crate) fn per_bucket(
     points: &[Point3],
     per: usize,
