@@ -484,3 +484,56 @@ fn fit_oriented_carrier(
     }
     Ok((carrier, flipped))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rbf::Blocks;
+
+    /// A support estimate whose whole system takes 100 MiB by [`check_memory`]'s rule.
+    fn hundred_mib() -> SupportEstimate {
+        SupportEstimate {
+            radius: 0.01,
+            mean_neighbours: 30.0,
+            estimated_nnz: 100.0 * (1u64 << 20) as f64 / 32.0,
+            spacing: 0.003,
+        }
+    }
+
+    #[test]
+    fn blocks_run_two_at_a_time_only_when_the_budget_holds_two() {
+        // 10,000 points in blocks of 1,000: one block's system is 1.5 × 1,000 / 10,000 of the
+        // whole, 15 MiB; two are 30 MiB.
+        let params = |mib| ReconParams {
+            blocks: Blocks::MaxPoints(1000),
+            max_memory_mib: mib,
+            ..ReconParams::default()
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let s = hundred_mib();
+        let wave = |mib| pool.install(|| block_wave(&s, 10_000, 1, &params(mib)));
+        assert_eq!(wave(40).unwrap(), 2);
+        assert_eq!(wave(20).unwrap(), 1);
+        assert!(matches!(wave(10), Err(RbfError::TooLarge { .. })));
+        // One thread: one block at a time whatever the budget.
+        let single = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        assert_eq!(
+            single
+                .install(|| block_wave(&s, 10_000, 1, &params(1000)))
+                .unwrap(),
+            1
+        );
+        // Without blocks the whole system must fit.
+        let whole = ReconParams {
+            max_memory_mib: 99,
+            ..ReconParams::default()
+        };
+        assert!(pool.install(|| block_wave(&s, 10_000, 1, &whole)).is_err());
+    }
+}
