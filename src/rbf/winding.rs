@@ -276,22 +276,11 @@ impl DipoleTree {
                 | ((p[2] > mid[2]) as usize) << 2
         };
         // A stable counting partition by octant (what a stable sort by octant gives, in O(n)).
-        let sub = &mut order[range.clone()];
-        let keys: Vec<u8> = sub.iter().map(|&i| octant(&points[i]) as u8).collect();
-        let mut counts = [0usize; 8];
-        for &k in &keys {
-            counts[k as usize] += 1;
-        }
-        let mut at = [0usize; 8];
-        for o in 1..8 {
-            at[o] = at[o - 1] + counts[o - 1];
-        }
-        let mut sorted = vec![0usize; sub.len()];
-        for (&i, &k) in sub.iter().zip(&keys) {
-            sorted[at[k as usize]] = i;
-            at[k as usize] += 1;
-        }
-        sub.copy_from_slice(&sorted);
+        let counts = crate::spatial::partition8(
+            &mut order[range.clone()],
+            |i| octant(&points[i]),
+            &mut Vec::new(),
+        );
         let mut start = range.start;
         let mut children = Vec::new();
         for &len in &counts {

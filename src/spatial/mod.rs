@@ -31,6 +31,7 @@ use crate::geometry::Point3;
 pub use batch::{NeighbourLists, within_batch};
 pub use kdtree::KdTree;
 pub use morton::{morton_order, sort_by_morton};
+pub(crate) use octree::partition8;
 pub use octree::{MAX_DEPTH, Octree, OctreeParams, OctreeStats};
 pub use octree_removal::RemovalSet;
 

@@ -334,22 +334,32 @@ fn partition_octants(
     center: Point3,
     scratch: &mut Vec<u32>,
 ) -> [usize; 8] {
+    partition8(idx, |i| octant(&points[i as usize], &center), scratch)
+}
+
+/// Stable counting sort of `items` by `key` (in `0..8`, e.g. an octant), through `scratch`;
+/// returns the count per key. `O(n)`.
+pub(crate) fn partition8<T: Copy + Default>(
+    items: &mut [T],
+    key: impl Fn(T) -> usize,
+    scratch: &mut Vec<T>,
+) -> [usize; 8] {
     let mut counts = [0usize; 8];
-    for &i in idx.iter() {
-        counts[octant(&points[i as usize], &center)] += 1;
+    for &i in items.iter() {
+        counts[key(i)] += 1;
     }
     let mut offsets = [0usize; 8];
     for o in 1..8 {
         offsets[o] = offsets[o - 1] + counts[o - 1];
     }
     scratch.clear();
-    scratch.resize(idx.len(), 0);
-    for &i in idx.iter() {
-        let o = octant(&points[i as usize], &center);
+    scratch.resize(items.len(), T::default());
+    for &i in items.iter() {
+        let o = key(i);
         scratch[offsets[o]] = i;
         offsets[o] += 1;
     }
-    idx.copy_from_slice(scratch);
+    items.copy_from_slice(scratch);
     counts
 }
 
