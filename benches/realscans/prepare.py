@@ -232,15 +232,20 @@ def main():
         print('  %-28s (copy)  %s' % (name, what), file=sys.stderr)
 
     # --- closed statues with thin parts: point samples of CGAL's closed meshes (truth known) ---
-    def statue(mesh, genus, variants):
+    def statue(mesh, genus, variants, embedded=True):
         verts, faces = read_off(os.path.join(cgal, 'meshes', mesh + '.off'))
         truth = os.path.join(out, 'truth', mesh + '.off')
         write_off(truth, verts, faces)
         exp = 'closed: 1 watertight component, genus %d' % genus
+        if not embedded:
+            # The truth passes through itself: its mesh genus is no surface's (truth_topology.py
+            # counts its solid's handles: more at every finer voxel size), so only closure is checked.
+            exp = ('closed: 1 watertight component, genus unchecked (the truth mesh passes through '
+                   'itself: its solid has more handles the finer it is voxelized, truth_topology.py)')
         for tag, n, seed, noise, normals in variants:
             pts = sample_mesh(verts, faces, n, seed)
-            what = '%s (CGAL meshes/%s.off, genus %d): %d area-uniform samples, seed %d' % (
-                mesh, mesh, genus, n, seed)
+            what = '%s (CGAL meshes/%s.off, genus %d%s): %d area-uniform samples, seed %d' % (
+                mesh, mesh, genus, '' if embedded else ' as a mesh, self-intersecting', n, seed)
             if noise:
                 pts = add_noise(pts, noise, seed + 1000)
                 what += ', noise %.2g%% of the diagonal' % (noise * 100)
@@ -253,8 +258,8 @@ def main():
 
     statue('armadillo', 0, [('10k-n', 10000, 1, 0, True), ('10k-xyz', 10000, 1, 0, False),
                             ('3k-xyz', 3000, 2, 0, False), ('26k-noise0.25-xyz', 26000, 3, 0.0025, False)])
-    statue('camel', 0, [('10k-n', 10000, 1, 0, True), ('10k-xyz', 10000, 1, 0, False)])
-    statue('man', 0, [('26k-xyz', 26000, 1, 0, False)])
+    statue('camel', 0, [('10k-n', 10000, 1, 0, True), ('10k-xyz', 10000, 1, 0, False)], embedded=False)
+    statue('man', 0, [('26k-xyz', 26000, 1, 0, False)], embedded=False)
     statue('elephant', 3, [('10k-xyz', 10000, 1, 0, False)])
 
     # --- the shared CGAL scans ---
