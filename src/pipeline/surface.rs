@@ -231,7 +231,7 @@ fn unsupported_share(
     let total = area(&mesh);
     // The coarse vertices are not refined (linear interpolation on edges a coarse cell long), so
     // on a thin part a triangle can sit up to about half a cell off the zero set: it counts as
-    // unsupported only beyond the support radius plus that (an elk's antlers at R alone: 4 %).
+    // unsupported only beyond the support radius plus that (an elk's thin crown at R alone: 4 %).
     let far = fit.support_radius + 0.5 * longest / cells as f64;
     let drop = trim::unsupported_triangles(&mesh, &fit.points, far);
     trim::remove_triangles(&mut mesh, &drop);

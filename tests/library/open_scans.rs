@@ -155,7 +155,7 @@ fn a_sphere_with_wide_holes_all_round_is_closed_not_trimmed() {
 }
 
 /// The open-or-closed rule on a closed object whose middle the data do not surround (an elk
-/// whose crown, legs and the hole through its body leave a 40° cone empty), so the coarse pass
+/// whose crown, legs and the hole through its body leave a cone of about 40° empty), so the coarse pass
 /// decides: its unrefined vertices on the thin crown lay up to half a coarse cell off the zero set
 /// and counted as unsupported (4 % of the area, the elk came out trimmed open with a hole). Data
 /// taken all around a closed object must give a closed surface.
