@@ -10,10 +10,9 @@
 //! are closed: whatever surface lies away from them is holes in data taken all around (oceans on a
 //! globe, a sparse scan's gaps), which the carrier closes. Otherwise it is decided on a coarse
 //! polygonization (a quarter of the resolution, ~1/16 of the triangles) without its floaters: when
-//! more than [`AUTO_TRIM_FRACTION`] of its area is farther than the support radius (plus half a
-//! coarse cell: the coarse vertices are not refined) from every point, the carrier continues the
-//! data's own sheet far beyond them (an open scan) and the surface is trimmed; a closed object's
-//! unsupported patches are a tiny part (bunny 10k: 0.03%, an elk's thin crown 0.8%),
+//! more than [`AUTO_TRIM_FRACTION`] of its area is farther than the support radius from every
+//! point, the carrier continues the data's own sheet far beyond them (an open scan) and the
+//! surface is trimmed; a closed object's unsupported patches are a tiny part (bunny 10k: 0.03%),
 //! and the carrier's blobs away from the data are floaters, not counted. A coarse surface that is
 //! not closed inside the domain (a sheet of the carrier runs out to the box) counts as open too:
 //! trimming removes that sheet, closing would keep it; so does a final surface that is not closed
@@ -229,11 +228,7 @@ fn unsupported_share(
         return Ok(1.0);
     }
     let total = area(&mesh);
-    // The coarse vertices are not refined (linear interpolation on edges a coarse cell long), so
-    // on a thin part a triangle can sit up to about half a cell off the zero set: it counts as
-    // unsupported only beyond the support radius plus that (an elk's thin crown at R alone: 4 %).
-    let far = fit.support_radius + 0.5 * longest / cells as f64;
-    let drop = trim::unsupported_triangles(&mesh, &fit.points, far);
+    let drop = trim::unsupported_triangles(&mesh, &fit.points, fit.support_radius);
     trim::remove_triangles(&mut mesh, &drop);
     let supported = area(&mesh);
     Ok(if total > 0.0 {
