@@ -630,7 +630,7 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub outlier_std_ratio: Option<f64>,
-    /// Unsupported surface: auto (default: with the local carrier, open when more than 2% of a coarse pass's surface is farther than R from the data and the data leave a cone wider than 25° empty around their middle — a single-view scan or open scene — else closed, e.g. data all around an object with occlusion holes), trim (polygonize only the data band; manifold border), closed.
+    /// Unsupported surface: auto (default: with the local carrier, open when more than 2% of a coarse pass's surface is farther than R from the data, the data leave a cone wider than 25° empty around their middle and their oriented points enclose no volume — a single-view scan or open scene — else closed, e.g. data all around an object with occlusion holes), trim (polygonize only the data band; manifold border), closed.
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
     #[cfg_attr(feature = "server", param(value_type = Option<String>))]

@@ -269,6 +269,11 @@ pub struct PolygonizeReport {
     /// point (`--boundary auto` with the local carrier; else null): below 25° the data surround
     /// the object and the surface is closed without the coarse pass.
     pub empty_cone_deg: Option<f64>,
+    /// Of the space where the oriented data's winding number is clearly non-zero, the share where
+    /// it says enclosed (`|w| ≥ ¼` / `w ≥ ¾`; `--boundary auto` with the local carrier when the data
+    /// do not surround their middle, else null): from 0.15 the data enclose a volume and the
+    /// surface is closed without the coarse pass.
+    pub enclosed_share: Option<f64>,
     /// Triangles the polygonizer produced (open surfaces: only in the band the data support).
     pub triangles_polygonized: usize,
     /// Triangles dropped because no data point is within the support radius (open scans).

@@ -631,6 +631,12 @@ impl LocalCarrier {
         (abs > 0.0 && sum.abs() > 0.05 * abs).then_some(sum < 0.0)
     }
 
+    /// The share of the space around the data where the oriented points' winding number says
+    /// "enclosed" ([`WindingGrid::enclosed_share`]); `None` without a winding grid.
+    pub fn enclosed_share(&self) -> Option<f64> {
+        self.winding.as_ref().map(|w| w.enclosed_share())
+    }
+
     /// `g(x)`, querying the index (the value [`Self::value_gradient`] gives, without the
     /// gradient's work).
     pub fn value(&self, x: &Point3) -> f64 {

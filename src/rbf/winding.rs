@@ -149,24 +149,41 @@ impl WindingGrid {
     /// `(Σ w, Σ |w|)` over a 17³ lattice spanning the grid (with outward normals `Σ w` is about
     /// the enclosed volume in lattice cells).
     pub fn sums(&self) -> (f64, f64) {
+        (self.lattice().iter()).fold((0.0, 0.0), |(s, a), &v| (s + v, a + v.abs()))
+    }
+
+    /// Of the samples of a 17³ lattice spanning the grid where the data's winding number is
+    /// clearly non-zero (`|w| ≥ ¼`), the share where it reaches `w ≥ ¾`: a volume the oriented
+    /// data enclose. About ½–⅞ for closed objects sampled all around (thin parts keep it low: the
+    /// softened dipoles blur `w` over about a spacing), 0–0.03 for open scans, scenes and one-sided
+    /// sheets, whose `|w|` stays near ½ or below. 0 when no sample has `|w| ≥ ¼`.
+    pub fn enclosed_share(&self) -> f64 {
+        let w = self.lattice();
+        let some = w.iter().filter(|v| v.abs() >= 0.25).count();
+        let full = w.iter().filter(|&&v| v >= 0.75).count();
+        if some == 0 {
+            0.0
+        } else {
+            full as f64 / some as f64
+        }
+    }
+
+    /// `w` on a 17³ lattice spanning the grid (corners included), x fastest.
+    fn lattice(&self) -> Vec<f64> {
         const N: usize = 17;
         let ext = [0, 1, 2].map(|a| (self.dims[a] - 1) as f64 * self.h);
-        let sample: Vec<Point3> = (0..N * N * N)
+        (0..N * N * N)
+            .into_par_iter()
             .map(|n| {
                 let (i, j, k) = (n % N, (n / N) % N, n / (N * N));
-                [
+                let x = [
                     self.origin[0] + ext[0] * i as f64 / (N - 1) as f64,
                     self.origin[1] + ext[1] * j as f64 / (N - 1) as f64,
                     self.origin[2] + ext[2] * k as f64 / (N - 1) as f64,
-                ]
+                ];
+                self.sign * self.tree.winding(x)
             })
-            .collect();
-        sample
-            .par_iter()
-            .map(|&x| self.sign * self.tree.winding(x))
-            .collect::<Vec<_>>()
-            .iter()
-            .fold((0.0, 0.0), |(s, a), &v| (s + v, a + v.abs()))
+            .collect()
     }
 
     /// Cell edge length, normalised units.

@@ -63,6 +63,8 @@ fn a_range_image_with_holes_gives_one_manifold_sheet_polygonized_in_the_band() {
     assert!(p.unsupported_share.is_some_and(|s| s > 0.02), "{p:?}");
     // Seen from its middle, the sheet leaves the space above and below it empty.
     assert!(p.empty_cone_deg.is_some_and(|d| d > 60.0), "{p:?}");
+    // A one-sided sheet encloses no volume.
+    assert!(p.enclosed_share.is_some_and(|e| e < 0.15), "{p:?}");
     // One sheet with two holes: a disk minus two disks, χ = 1 − 2, three boundary loops.
     assert!(!m.watertight && m.manifold && m.oriented, "{m:?}");
     assert_eq!(
@@ -152,4 +154,24 @@ fn a_sphere_with_wide_holes_all_round_is_closed_not_trimmed() {
     assert_eq!(rec.report.params.boundary, "closed");
     assert!(m.watertight && m.manifold, "{m:?}");
     assert_eq!((m.components, m.genus), (1, Some(0)), "{m:?}");
+}
+
+/// The open-or-closed rule on a closed object whose middle the data do not surround: an elk whose
+/// crown, legs and the hole through its body leave a cone of about 40° empty. Its thin crown puts
+/// 4 % of a coarse pass's surface farther than R from the data, so that pass alone trimmed it open
+/// with a hole; its oriented points enclose a volume (winding number ≥ ¾ over 30 % of where it is
+/// clearly non-zero), so it is closed. Data taken all around a closed object give a closed surface.
+#[test]
+fn a_closed_elk_sampled_all_around_without_normals_comes_out_closed() {
+    let cloud =
+        rbfsurf::io::read_point_cloud(std::path::Path::new("data/elk-3k.xyz"), &Default::default())
+            .unwrap();
+    assert!(cloud.normals.is_none());
+    let rec = reconstruct(&cloud, &ReconParams::default(), &NoProgress).unwrap();
+    let (m, p) = (&rec.report.mesh, &rec.report.polygonize);
+    assert!(p.empty_cone_deg.is_some_and(|d| d > 25.0), "{p:?}");
+    assert!(p.enclosed_share.is_some_and(|e| e > 0.15), "{p:?}");
+    assert_eq!(rec.report.params.boundary, "closed");
+    assert!(m.watertight && m.manifold && m.oriented, "{m:?}");
+    assert_eq!((m.components, m.boundary_loops), (1, 0), "{m:?}");
 }
