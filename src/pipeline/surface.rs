@@ -170,10 +170,11 @@ fn surrounded(fit: &FittedField, s: &mut PolygonizeReport) -> bool {
     cone < SURROUNDED_BELOW_DEG
 }
 
-/// Whether the oriented data enclose a volume ([`crate::rbf::carrier::LocalCarrier::enclosed_share`] at
-/// least [`ENCLOSED_ABOVE`]), recorded in the report: a closed object whose middle the data do not
-/// surround (thin limbs, a hole through the body) is still closed, while an open scan, a scene
-/// or a one-sided sheet never reaches it.
+/// Whether the oriented data enclose a volume
+/// ([`crate::rbf::carrier::LocalCarrier::enclosed_share`] at least [`ENCLOSED_ABOVE`]), recorded
+/// in the report: a closed object whose middle the data do not surround (thin limbs, a hole
+/// through the body) is still closed, while an open scan, a scene or a one-sided sheet never
+/// reaches it.
 fn encloses_volume(fit: &FittedField, s: &mut PolygonizeReport) -> bool {
     let share = match fit.rbf.as_deref().map(|f| &f.carrier) {
         Some(crate::rbf::Carrier::Local(l)) => l.enclosed_share(),
