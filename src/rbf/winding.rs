@@ -39,6 +39,10 @@ pub struct WindingGrid {
     dims: [usize; 3],
     /// Node values, x fastest, filled on first use.
     values: Vec<OnceLock<f64>>,
+    /// `w` before [`Self::negate`] on the 17³ lattice of [`Self::sums`] and
+    /// [`Self::enclosed_share`] (the carrier's orientation and the open-or-closed decision read
+    /// the same samples), filled on first use.
+    lattice: OnceLock<Vec<f64>>,
     /// The dipoles.
     tree: DipoleTree,
     /// −1 after [`WindingGrid::negate`].
@@ -80,6 +84,7 @@ impl WindingGrid {
             h,
             dims,
             values,
+            lattice: OnceLock::new(),
             tree,
             sign: 1.0,
         })
@@ -149,7 +154,9 @@ impl WindingGrid {
     /// `(Σ w, Σ |w|)` over a 17³ lattice spanning the grid (with outward normals `Σ w` is about
     /// the enclosed volume in lattice cells).
     pub fn sums(&self) -> (f64, f64) {
-        (self.lattice().iter()).fold((0.0, 0.0), |(s, a), &v| (s + v, a + v.abs()))
+        (self.lattice().iter())
+            .map(|&v| self.sign * v)
+            .fold((0.0, 0.0), |(s, a), v| (s + v, a + v.abs()))
     }
 
     /// Of the samples of a 17³ lattice spanning the grid where the data's winding number is
@@ -160,7 +167,7 @@ impl WindingGrid {
     pub fn enclosed_share(&self) -> f64 {
         let w = self.lattice();
         let some = w.iter().filter(|v| v.abs() >= 0.25).count();
-        let full = w.iter().filter(|&&v| v >= 0.75).count();
+        let full = w.iter().filter(|&&v| self.sign * v >= 0.75).count();
         if some == 0 {
             0.0
         } else {
@@ -168,22 +175,25 @@ impl WindingGrid {
         }
     }
 
-    /// `w` on a 17³ lattice spanning the grid (corners included), x fastest.
-    fn lattice(&self) -> Vec<f64> {
+    /// `w` before [`Self::negate`] on a 17³ lattice spanning the grid (corners included), x
+    /// fastest; computed once.
+    fn lattice(&self) -> &[f64] {
         const N: usize = 17;
-        let ext = [0, 1, 2].map(|a| (self.dims[a] - 1) as f64 * self.h);
-        (0..N * N * N)
-            .into_par_iter()
-            .map(|n| {
-                let (i, j, k) = (n % N, (n / N) % N, n / (N * N));
-                let x = [
-                    self.origin[0] + ext[0] * i as f64 / (N - 1) as f64,
-                    self.origin[1] + ext[1] * j as f64 / (N - 1) as f64,
-                    self.origin[2] + ext[2] * k as f64 / (N - 1) as f64,
-                ];
-                self.sign * self.tree.winding(x)
-            })
-            .collect()
+        self.lattice.get_or_init(|| {
+            let ext = [0, 1, 2].map(|a| (self.dims[a] - 1) as f64 * self.h);
+            (0..N * N * N)
+                .into_par_iter()
+                .map(|n| {
+                    let (i, j, k) = (n % N, (n / N) % N, n / (N * N));
+                    let x = [
+                        self.origin[0] + ext[0] * i as f64 / (N - 1) as f64,
+                        self.origin[1] + ext[1] * j as f64 / (N - 1) as f64,
+                        self.origin[2] + ext[2] * k as f64 / (N - 1) as f64,
+                    ];
+                    self.tree.winding(x)
+                })
+                .collect()
+        })
     }
 
     /// Cell edge length, normalised units.
