@@ -1,9 +1,10 @@
 //! PCA normals: the eigenvector of the smallest eigenvalue of the covariance of each point's k
-//! nearest neighbours (itself included). Also returns the k-NN lists that the orientation graph is
-//! built from. Neighbours come from [`crate::spatial::KdTree`]. `O(n k log n)`, parallel.
+//! nearest neighbours (itself included), fitted to the point's own sheet where the neighbourhood
+//! reaches across a thin part ([`sheet_normal`]). Also returns the k-NN lists that the orientation
+//! graph is built from. Neighbours come from [`crate::spatial::KdTree`]. `O(n k log n)`, parallel.
 
-use crate::geometry::Point3;
 use crate::geometry::pca::pca;
+use crate::geometry::{Point3, cross, dist2, dot, normalized, sub};
 use crate::spatial::{KdTree, SpatialIndex};
 use rayon::prelude::*;
 
@@ -28,7 +29,7 @@ pub fn estimate_normals(points: &[Point3], k: usize) -> (Vec<Point3>, Vec<Vec<u3
                 tree.nearest_k(p, want, nn);
                 local.clear();
                 local.extend(nn.iter().map(|&(j, _)| points[j as usize]));
-                let n = pca(local).axes[2];
+                let n = sheet_normal(local, *p);
                 let nbrs = nn
                     .iter()
                     .map(|&(j, _)| j)
@@ -38,6 +39,116 @@ pub fn estimate_normals(points: &[Point3], k: usize) -> (Vec<Point3>, Vec<Vec<u3
             },
         )
         .unzip()
+}
+
+/// Refits of the plane to the point's own sheet.
+const SHEET_ROUNDS: usize = 3;
+/// Neighbours (nearest first) whose planes through the point are tried when PCA's is not flat.
+const TRIAL_NEIGHBOURS: usize = 8;
+/// PCA plane flat enough to be kept without trials: smallest variance below this share of the
+/// total.
+const FLAT_SHARE: f64 = 0.02;
+/// Trial planes count the points within this share of the neighbourhood's radius.
+const TRIAL_BAND: f64 = 0.05;
+
+/// The normal line at `p` from its neighbourhood `local` (`p` first, then nearest first): the
+/// PCA normal, unless the neighbourhood holds two sheets, the two faces of a part thinner than
+/// the neighbourhood (a plate, two touching sheets). A plane through both faces tilts by up to
+/// 70° where one face outnumbers the other, and offsets along it show no gap; so when PCA's plane
+/// is not flat, the plane through `p` and two of its nearest neighbours that holds most points
+/// within a thin band is tried too. A candidate normal is accepted when the offsets along it split
+/// at a clear gap (see [`own_sheet`]); the plane is then refitted to the group holding `p`, up to
+/// [`SHEET_ROUNDS`] times. A curved or noisy single sheet (offsets without a gap) keeps its PCA
+/// normal.
+fn sheet_normal(local: &[Point3], p: Point3) -> Point3 {
+    let fit = pca(local);
+    let radius = local
+        .iter()
+        .map(|q| dist2(*q, p))
+        .fold(0.0, f64::max)
+        .sqrt();
+    let total: f64 = fit.variances.iter().sum();
+    let mut candidates = vec![fit.axes[2]];
+    if fit.variances[2] > FLAT_SHARE * total {
+        candidates.extend(densest_plane(local, p, radius));
+    }
+    candidates
+        .into_iter()
+        .find_map(|n| refit_own_sheet(local, p, n, radius))
+        .unwrap_or(fit.axes[2])
+}
+
+/// The normal of the plane through `p` and two of its [`TRIAL_NEIGHBOURS`] nearest (`local[1..]`)
+/// that has most of `local` within `TRIAL_BAND × radius`; the first such plane on ties.
+fn densest_plane(local: &[Point3], p: Point3, radius: f64) -> Option<Point3> {
+    let near = &local[1..local.len().min(TRIAL_NEIGHBOURS + 1)];
+    let band = TRIAL_BAND * radius;
+    let mut best: Option<(usize, Point3)> = None;
+    for (a, qa) in near.iter().enumerate() {
+        for qb in &near[a + 1..] {
+            let Some(n) = normalized(cross(sub(*qa, p), sub(*qb, p))) else {
+                continue;
+            };
+            let inside = local
+                .iter()
+                .filter(|q| dot(sub(**q, p), n).abs() < band)
+                .count();
+            if best.is_none_or(|(b, _)| inside > b) {
+                best = Some((inside, n));
+            }
+        }
+    }
+    best.map(|(_, n)| n)
+}
+
+/// Starting from the normal `n`, the plane refitted to `p`'s own sheet; `None` unless the offsets
+/// split into two sheets along `n` and along every refitted normal (a sub-cluster of one noisy
+/// sheet may split along a steep trial plane, but not along its own refitted plane).
+fn refit_own_sheet(local: &[Point3], p: Point3, mut n: Point3, radius: f64) -> Option<Point3> {
+    let mut offsets: Vec<f64> = Vec::with_capacity(local.len());
+    let mut own: Vec<Point3> = Vec::with_capacity(local.len());
+    for round in 0..=SHEET_ROUNDS {
+        offsets.clear();
+        offsets.extend(local.iter().map(|q| dot(sub(*q, p), n)));
+        let (lo, hi) = own_sheet(&offsets, radius)?;
+        if round == SHEET_ROUNDS {
+            break;
+        }
+        own.clear();
+        own.extend(
+            local
+                .iter()
+                .zip(&offsets)
+                .filter(|&(_, &h)| h >= lo && h <= hi)
+                .map(|(q, _)| *q),
+        );
+        n = pca(&own).axes[2];
+    }
+    Some(n)
+}
+
+/// The offset range `[lo, hi]` of the group holding offset 0 when the sorted `offsets` split at
+/// their largest gap into two groups, the one holding 0 of at least 4 points, with the gap above
+/// `radius / 4` and above twice each group's spread; `None` for one sheet.
+fn own_sheet(offsets: &[f64], radius: f64) -> Option<(f64, f64)> {
+    let mut h = offsets.to_vec();
+    h.sort_by(f64::total_cmp);
+    let (cut, gap) = h
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| (i + 1, w[1] - w[0]))
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let (below, above) = h.split_at(cut);
+    let spread = |g: &[f64]| g[g.len() - 1] - g[0];
+    if gap <= 0.25 * radius || gap <= 2.0 * spread(below).max(spread(above)) {
+        return None;
+    }
+    let own = if below[below.len() - 1] >= 0.0 {
+        below
+    } else {
+        above
+    };
+    (own.len() >= 4).then(|| (own[0], own[own.len() - 1]))
 }
 
 /// Area represented by each point: `π d² / m` where `d` is the distance to the farthest of its `m`
