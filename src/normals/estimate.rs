@@ -58,8 +58,8 @@ const TRIAL_BAND: f64 = 0.05;
 /// is not flat, the plane through `p` and two of its nearest neighbours that holds most points
 /// within a thin band is tried too. A candidate normal is accepted when the offsets along it split
 /// at a clear gap (see [`own_sheet`]); the plane is then refitted to the group holding `p`, up to
-/// [`SHEET_ROUNDS`] times. A curved or noisy single sheet (offsets without a gap) keeps its PCA
-/// normal.
+/// [`SHEET_ROUNDS`] times, as long as the split persists ([`refit_own_sheet`]). A curved or noisy
+/// single sheet (offsets without a gap) keeps its PCA normal.
 fn sheet_normal(local: &[Point3], p: Point3) -> Point3 {
     let fit = pca(local);
     let radius = local
