@@ -266,6 +266,9 @@ def main():
     for mesh, genus in [('bear', 0), ('bull', 0), ('fandisk', 0), ('homer', 0), ('diplodocus', 0),
                         ('ChineseDragon-10kv', 0), ('knot', 1), ('eight', 2), ('elk', 1)]:
         statue(mesh, genus, [('10k-xyz', 10000, 1, 0, False)])
+    # Added in the eighteenth session: the elk's other samples whose thin plates flipped regions of
+    # the estimated normals (docs/robustness.md, "Inward regions inside a patch").
+    statue('elk', 1, [('10k-s%d-xyz' % seed, 10000, seed, 0, False) for seed in (4, 5, 6)])
 
     # --- the shared CGAL scans ---
     bunny_ref = os.path.join(shared, 'bunny00.off')

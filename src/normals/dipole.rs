@@ -162,23 +162,39 @@ pub(crate) fn patch_couplings(cloud: &PatchedCloud) -> Vec<f64> {
 /// (every patch, every component). On a consistently outward closed surface it is ½ at every
 /// point; a closed piece that points inward sees about −½.
 pub(crate) fn patch_winding(cloud: &PatchedCloud) -> Vec<f64> {
-    let m = cloud.patches.count;
-    let Some(sources) = Sources::new(cloud) else {
-        return vec![0.0; m];
-    };
-    pick_targets(cloud)
-        .par_iter()
+    let targets = pick_targets(cloud);
+    let flat: Vec<u32> = targets.iter().flatten().map(|&(i, _)| i).collect();
+    let w = winding_at(cloud, &flat);
+    let mut at = 0;
+    targets
+        .iter()
         .map(|list| {
             let (mut sum, mut weights) = (0.0, 0.0);
-            for &(i, weight) in list {
-                let x = cloud.points[i as usize];
-                let mut w = 0.0;
-                let kernel = |s, mu| winding(x, s, mu, sources.eps2);
-                sources.visit(&x, |_| false, kernel, |_, v| w += v);
-                sum += weight * w;
+            for &(_, weight) in list {
+                sum += weight * w[at];
                 weights += weight;
+                at += 1;
             }
             if weights > 0.0 { sum / weights } else { 0.0 }
+        })
+        .collect()
+}
+
+/// The winding number of the whole cloud (every patch, every component) at each of the points
+/// `targets` (indices into `cloud.points`); all zero for an empty or degenerate cloud.
+/// `O(targets · (clusters + near points))`, parallel.
+pub(crate) fn winding_at(cloud: &PatchedCloud, targets: &[u32]) -> Vec<f64> {
+    let Some(sources) = Sources::new(cloud) else {
+        return vec![0.0; targets.len()];
+    };
+    targets
+        .par_iter()
+        .map(|&i| {
+            let x = cloud.points[i as usize];
+            let mut w = 0.0;
+            let kernel = |s, mu| winding(x, s, mu, sources.eps2);
+            sources.visit(&x, |_| false, kernel, |_, v| w += v);
+            w
         })
         .collect()
 }

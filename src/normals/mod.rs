@@ -11,6 +11,7 @@ mod estimate;
 mod graph;
 mod orient;
 mod patches;
+mod regions;
 mod signed_sets;
 #[cfg(test)]
 mod tests;

@@ -9,7 +9,11 @@
 //!    any lowers the energy);
 //! 4. per connected component of the k-NN graph, the sign that makes the enclosed volume
 //!    `⅓ Σ a_i (p_i − c)·n_i` positive: outward for a closed surface, towards the convex side
-//!    (the scanner, for one range image of a convex object) for an open one.
+//!    (the scanner, for one range image of a convex object) for an open one; then every patch
+//!    whose mean winding number says it is a closed piece pointing inward is flipped;
+//! 5. inward regions inside a patch ([`super::regions`]): points whose own winding number is
+//!    about −½, connected through confident edges, are flipped (one misleading edge across a thin
+//!    plate flips part of a patch, which the patch's mean does not show).
 //!
 //! It replaces MST propagation with cost `1 − |n_i·n_j|` (Hoppe et al. 1992), which flipped whole
 //! thin limbs and near-touching sheets. Deterministic. Cost `O(n k log n)` plus the dipole sums.
@@ -18,6 +22,7 @@ use super::dipole::{PatchedCloud, patch_couplings, patch_winding};
 use super::estimate::point_areas;
 use super::graph::riemannian_edges;
 use super::patches::{Patches, components, grow_patches};
+use super::regions::flip_inward_regions;
 use super::signed_sets::SignedSets;
 use crate::geometry::{Point3, dot, sub};
 
@@ -72,6 +77,20 @@ pub fn orient_normals(
     });
     let inward: Vec<bool> = winding.iter().map(|&w| w < INWARD_WINDING).collect();
     apply_patch_flips(&mut normals, &patches, &inward);
+    let before = normals.clone();
+    flip_inward_regions(
+        &PatchedCloud {
+            points,
+            normals: &before,
+            areas: &areas,
+            patches: &patches,
+            component: &patch_component,
+        },
+        &mut normals,
+        &edges,
+        MIN_CONFIDENCE,
+        INWARD_WINDING,
+    );
     normals
 }
 
