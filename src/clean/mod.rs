@@ -87,6 +87,20 @@ pub enum InputError {
         /// Point count.
         n: usize,
     },
+    /// The points lie along lines or curves: no surface through them.
+    #[error(
+        "the {n} points sample a curve, not a surface: their neighbourhoods are lines (median \
+         second/total variance {breadth:.4} at {scale} neighbours; surfaces give > 0.3). Scan the \
+         surface itself, not a line or a profile across it"
+    )]
+    NotASurfaceButACurve {
+        /// Point count.
+        n: usize,
+        /// [`crate::geometry::pca::LocalShape::breadth`].
+        breadth: f64,
+        /// Neighbours at which it was measured.
+        scale: usize,
+    },
     /// The points fill a volume at every scale: pure noise, not a sampled surface.
     #[error(
         "the {n} points do not sample a surface: their neighbourhoods are as thick as they are wide at \
@@ -208,6 +222,39 @@ pub fn check_degenerate(points: &[Point3], has_normals: bool) -> Result<(), Inpu
     }
     if !has_normals && p.variances[2].max(0.0).sqrt() <= 1e-7 * l0.sqrt() {
         return Err(InputError::Coplanar { n });
+    }
+    Ok(())
+}
+
+/// Local thickness (see [`crate::geometry::pca::LocalShape`]) above which the points are taken
+/// for noise filling a volume rather than a sampled surface.
+const MAX_SURFACE_THICKNESS: f64 = 0.12;
+/// Local breadth below which the points are taken for a curve: the second axis of their
+/// neighbourhoods under a tenth of the first, where every scan of the real-scan suite measures
+/// 0.31–0.47.
+const MIN_SURFACE_BREADTH: f64 = 0.01;
+
+/// Refuse a cloud that does not sample a surface: one that fills a volume at every scale (pure
+/// noise), or whose neighbourhoods are lines (points along a curve; exactly collinear clouds are
+/// refused earlier by [`check_degenerate`]). Neighbours come from `nearest_k`.
+pub fn check_local_shape(
+    points: &[Point3],
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+) -> Result<(), InputError> {
+    let shape = crate::geometry::pca::local_shape(points, nearest_k);
+    let n = points.len();
+    if shape.thickness > MAX_SURFACE_THICKNESS {
+        return Err(InputError::NotASurface {
+            n,
+            thickness: shape.thickness,
+        });
+    }
+    if shape.breadth < MIN_SURFACE_BREADTH {
+        return Err(InputError::NotASurfaceButACurve {
+            n,
+            breadth: shape.breadth,
+            scale: shape.scale,
+        });
     }
     Ok(())
 }

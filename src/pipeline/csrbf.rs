@@ -35,7 +35,7 @@ pub fn fit_field(
     let t = Instant::now();
     let index: Arc<dyn SpatialIndex + Send> =
         Arc::from(build_index(&points, params.index, params.leaf_size)?);
-    check_surface(&points, index.as_ref())?;
+    crate::clean::check_local_shape(&points, |p, k, out| index.nearest_k(p, k, out))?;
     let normals_reoriented = reorient_inconsistent_normals(&mut clean, &points, index.as_ref());
     let support = estimate_support(&points, index.as_ref(), params.support)?;
     let noise = crate::rbf::estimate_noise(&points, support.spacing, |p, k, out| {
@@ -132,24 +132,6 @@ pub fn fit_field(
         color_mode: point_colors.as_ref().map(|_| params.color),
         point_colors,
     })
-}
-
-/// Local thickness (see [`crate::geometry::pca::surface_thickness`]) above which the points are
-/// taken for noise filling a volume rather than a sampled surface.
-const MAX_SURFACE_THICKNESS: f64 = 0.12;
-
-/// Refuse a cloud that fills a volume at every scale (pure noise) instead of meshing blobs.
-fn check_surface(points: &[Point3], index: &dyn SpatialIndex) -> Result<(), ReconError> {
-    let thickness =
-        crate::geometry::pca::surface_thickness(points, |p, k, out| index.nearest_k(p, k, out));
-    if thickness > MAX_SURFACE_THICKNESS {
-        return Err(crate::clean::InputError::NotASurface {
-            n: points.len(),
-            thickness,
-        }
-        .into());
-    }
-    Ok(())
 }
 
 /// Share of opposed neighbour normals above which the input's normals count as inconsistent.

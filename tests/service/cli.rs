@@ -86,6 +86,19 @@ fn bad_inputs_get_one_line_errors_and_no_output() {
         .map(|i| format!("{} {} 1\n", i % 10, i / 10))
         .collect();
     assert_refused(&w("plane.xyz", plane.as_bytes()), &[], "normals");
+    // A line as a file stores it: rounded to 6 decimals, so not exactly collinear; with normals
+    // too. Both are refused as a curve instead of meshed into a tube around the points.
+    let rounded: Vec<f64> = (0..500)
+        .map(|i| (i as f64 * 0.618_033_988_7).fract())
+        .collect();
+    let line: String = (rounded.iter())
+        .map(|t| format!("{t:.6} {:.6} {:.6}\n", 2.0 * t, 3.0 * t))
+        .collect();
+    assert_refused(&w("rounded_line.xyz", line.as_bytes()), &[], "curve");
+    let line: String = (rounded.iter())
+        .map(|t| format!("{t:.6} {:.6} {:.6} 0 0.6 -0.8\n", 2.0 * t, 3.0 * t))
+        .collect();
+    assert_refused(&w("rounded_line_n.xyz", line.as_bytes()), &[], "curve");
     assert_refused(
         &w("junk.bin", &[0u8, 159, 146, 150, 7, 255, 1, 2, 3]),
         &[],

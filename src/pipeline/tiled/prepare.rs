@@ -26,7 +26,7 @@ use super::store::Store;
 use super::survey::{self, Survey, TiledInput};
 use super::tasks::{GridPlan, block_key};
 use super::{TiledError, TiledOptions};
-use crate::clean::{CleanStats, InputError, check_degenerate};
+use crate::clean::{CleanStats, check_degenerate};
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Normalization, Point3};
 use crate::params::{Boundary, ReconParams};
@@ -56,9 +56,6 @@ const MARGIN_FACTOR: f64 = 1.25;
 /// Share of opposed neighbour normals above which the normals count as inconsistent (as in the
 /// in-memory pipeline, which then reorients them; that needs the whole cloud, so here it refuses).
 const INCONSISTENT_NORMALS: f64 = 0.05;
-
-/// Local thickness above which the points fill a volume (as in the in-memory pipeline).
-const MAX_SURFACE_THICKNESS: f64 = 0.12;
 
 /// The carrier every task rebuilds over its own points.
 pub(crate) enum CarrierPlan {
@@ -310,11 +307,7 @@ fn estimate_on_patches(
     let points: Vec<Point3> = kept.iter().map(|r| r.p).collect();
     let index = build_index(&points, IndexKind::KdTree, 16)?;
     let knn = |p: &Point3, k: usize, out: &mut Vec<(u32, f64)>| index.nearest_k(p, k, out);
-    let thickness = crate::geometry::pca::surface_thickness(&points, knn);
-    if thickness > MAX_SURFACE_THICKNESS {
-        let n = points.len();
-        return Err(InputError::NotASurface { n, thickness }.into());
-    }
+    crate::clean::check_local_shape(&points, knn)?;
     if normals {
         let ns: Vec<Point3> = kept.iter().map(|r| r.n).collect();
         let share = crate::normals::inconsistent_fraction(&points, &ns, 8, knn);
