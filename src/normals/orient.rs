@@ -22,7 +22,7 @@ use super::dipole::{PatchedCloud, patch_couplings, patch_winding};
 use super::estimate::point_areas;
 use super::graph::riemannian_edges;
 use super::patches::{Patches, components, grow_patches};
-use super::regions::flip_inward_regions;
+use super::regions::inward_regions;
 use super::signed_sets::SignedSets;
 use crate::geometry::{Point3, dot, sub};
 
@@ -77,20 +77,21 @@ pub fn orient_normals(
     });
     let inward: Vec<bool> = winding.iter().map(|&w| w < INWARD_WINDING).collect();
     apply_patch_flips(&mut normals, &patches, &inward);
-    let before = normals.clone();
-    flip_inward_regions(
+    let flip = inward_regions(
         &PatchedCloud {
             points,
-            normals: &before,
+            normals: &normals,
             areas: &areas,
             patches: &patches,
             component: &patch_component,
         },
-        &mut normals,
         &edges,
         MIN_CONFIDENCE,
         INWARD_WINDING,
     );
+    for i in flip {
+        normals[i as usize] = normals[i as usize].map(|v| -v);
+    }
     normals
 }
 

@@ -17,26 +17,25 @@ use std::collections::VecDeque;
 
 use super::dipole::{PatchedCloud, winding_at};
 use super::graph::Edge;
-use crate::geometry::Point3;
 
 /// Most points at which the winding number is evaluated.
 const REGION_BUDGET: usize = 60_000;
 /// Fewest points in a region that is flipped (smaller ones are left to the fit).
 const MIN_REGION: usize = 8;
 
-/// Flip the normals of every inward region (see the module doc): points whose winding number is
-/// below `threshold`, connected through edges of at least `min_confidence` inside one patch, in
-/// groups of at least [`MIN_REGION`]. Returns the number of normals flipped.
-pub(crate) fn flip_inward_regions(
+/// The points of every inward region (see the module doc), whose normals are to be flipped: points
+/// whose winding number is below `threshold`, connected through edges of at least
+/// `min_confidence` inside one patch, in groups of at least [`MIN_REGION`].
+pub(crate) fn inward_regions(
     cloud: &PatchedCloud,
-    normals: &mut [Point3],
     edges: &[Edge],
     min_confidence: f64,
     threshold: f64,
-) -> usize {
+) -> Vec<u32> {
     let n = cloud.points.len();
+    let mut flip = Vec::new();
     if n == 0 {
-        return 0;
+        return flip;
     }
     let label = &cloud.patches.label;
     let mut adjacent: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -54,7 +53,6 @@ pub(crate) fn flip_inward_regions(
     let winding = spread(&adjacent, &targets, &at_targets);
     let inward: Vec<bool> = winding.iter().map(|&w| w < threshold).collect();
     let mut seen = vec![false; n];
-    let mut flipped = 0;
     let mut region = Vec::new();
     for start in 0..n {
         if seen[start] || !inward[start] {
@@ -75,13 +73,10 @@ pub(crate) fn flip_inward_regions(
             }
         }
         if region.len() >= MIN_REGION {
-            for &i in &region {
-                normals[i as usize] = normals[i as usize].map(|v| -v);
-            }
-            flipped += region.len();
+            flip.extend_from_slice(&region);
         }
     }
-    flipped
+    flip
 }
 
 /// Per point, the value of the nearest (in hops over `adjacent`) of the `sources`; `+∞` where none
@@ -110,6 +105,7 @@ fn spread(adjacent: &[Vec<u32>], sources: &[u32], values: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Point3;
     use crate::normals::patches::Patches;
 
     #[test]
@@ -161,7 +157,6 @@ mod tests {
             count: 1,
         };
         let run = |normals: &[Point3]| {
-            let mut out = normals.to_vec();
             let cloud = PatchedCloud {
                 points: &points,
                 normals,
@@ -169,8 +164,12 @@ mod tests {
                 patches: &patches,
                 component: &[0],
             };
-            let flipped = flip_inward_regions(&cloud, &mut out, &edges, 0.966, -0.3);
-            (flipped, out)
+            let flip = inward_regions(&cloud, &edges, 0.966, -0.3);
+            let mut out = normals.to_vec();
+            for &i in &flip {
+                out[i as usize] = out[i as usize].map(|v| -v);
+            }
+            (flip.len(), out)
         };
         let (flipped, out) = run(&truth);
         assert_eq!(flipped, 0);
