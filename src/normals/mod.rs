@@ -1,7 +1,9 @@
 //! Normals for clouds that have none: PCA over the k nearest neighbours ([`estimate`]), then a
 //! consistent orientation ([`orient`]) that survives thin limbs and near-touching sheets:
 //! confident local propagation inside patches ([`graph`], [`patches`]) and a global sign per patch
-//! from the winding-number (dipole) field of the others ([`dipole`]), then outward per component.
+//! from the winding-number (dipole) field of the others ([`dipole`]), then outward per component,
+//! inward regions ([`regions`]) and, on closed clean surfaces, each point by ray parity
+//! ([`parity`]).
 //!
 //! Measured against true normals with `cargo run --release --example normal_flips` (table in
 //! the README, section "Normals without input normals").
@@ -10,6 +12,7 @@ mod dipole;
 mod estimate;
 mod graph;
 mod orient;
+mod parity;
 mod patches;
 mod regions;
 mod signed_sets;

@@ -13,7 +13,11 @@
 //!    whose mean winding number says it is a closed piece pointing inward is flipped;
 //! 5. inward regions inside a patch ([`super::regions`]): points whose own winding number is
 //!    about −½, connected through confident edges, are flipped (one misleading edge across a thin
-//!    plate flips part of a patch, which the patch's mean does not show).
+//!    plate flips part of a patch, which the patch's mean does not show);
+//! 6. ray parity ([`super::parity`]): where the points make a closed, clean surface (almost every
+//!    point's rays agree), each point whose rays cross the other points' discs an odd number of
+//!    times outward and even inward is flipped: what is left on plates thinner than the
+//!    neighbourhood, where a wrong cluster keeps its own winding number near zero.
 //!
 //! It replaces MST propagation with cost `1 − |n_i·n_j|` (Hoppe et al. 1992), which flipped whole
 //! thin limbs and near-touching sheets. Deterministic. Cost `O(n k log n)` plus the dipole sums.
@@ -21,6 +25,7 @@
 use super::dipole::{PatchedCloud, patch_couplings, patch_winding};
 use super::estimate::point_areas;
 use super::graph::riemannian_edges;
+use super::parity::parity_flips;
 use super::patches::{Patches, components, grow_patches};
 use super::regions::inward_regions;
 use super::signed_sets::SignedSets;
@@ -90,6 +95,10 @@ pub fn orient_normals(
         INWARD_WINDING,
     );
     for i in flip {
+        normals[i as usize] = normals[i as usize].map(|v| -v);
+    }
+    let inward = parity_flips(points, &normals, neighbours, &component);
+    for i in inward {
         normals[i as usize] = normals[i as usize].map(|v| -v);
     }
     normals
