@@ -8,6 +8,8 @@ mod aabb;
 mod normalize;
 pub mod pca;
 mod surround;
+#[cfg(test)]
+pub(crate) use surround::fibonacci_direction;
 pub mod synthetic;
 
 pub use aabb::Aabb;

@@ -55,8 +55,8 @@ pub fn surround_cone(points: &[Point3]) -> f64 {
     largest_empty_cone(points, centroid).min(largest_empty_cone(points, centre))
 }
 
-/// Direction `i` of `n` spread evenly over the unit sphere.
-fn fibonacci_direction(i: usize, n: usize) -> Point3 {
+/// Direction `i` of `n` spread evenly over the unit sphere (a Fibonacci lattice).
+pub(crate) fn fibonacci_direction(i: usize, n: usize) -> Point3 {
     let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
     let r = (1.0 - z * z).max(0.0).sqrt();
     let phi = std::f64::consts::PI * (1.0 + 5f64.sqrt()) * i as f64;

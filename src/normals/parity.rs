@@ -429,16 +429,12 @@ pub(crate) fn parity_flips(
 mod tests {
     use super::*;
 
-    /// A sphere of `n` Fibonacci points, outward normals, and each point's nearest others.
+    /// A sphere of `n` evenly spread points and their outward normals.
     fn sphere(n: usize, centre: Point3, r: f64) -> (Vec<Point3>, Vec<Point3>) {
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
         (0..n)
             .map(|i| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let s = (1.0 - z * z).sqrt();
-                let phi = golden * i as f64;
-                let nrm = [s * phi.cos(), s * phi.sin(), z];
-                (std::array::from_fn(|a| centre[a] + r * nrm[a]), nrm)
+                let d = crate::geometry::fibonacci_direction(i, n);
+                (std::array::from_fn(|a| centre[a] + r * d[a]), d)
             })
             .unzip()
     }

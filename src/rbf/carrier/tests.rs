@@ -2,13 +2,9 @@
 use super::*;
 
 fn sphere_points(n: usize, c: Point3, r: f64) -> (Vec<Point3>, Vec<Point3>) {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)
         .map(|i| {
-            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let rr = (1.0 - z * z).sqrt();
-            let t = golden * i as f64;
-            let u = [rr * t.cos(), rr * t.sin(), z];
+            let u = crate::geometry::fibonacci_direction(i, n);
             ([c[0] + r * u[0], c[1] + r * u[1], c[2] + r * u[2]], u)
         })
         .unzip()
