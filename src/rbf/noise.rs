@@ -85,15 +85,18 @@ fn median_residual(
 ) -> f64 {
     let step = (points.len() / SAMPLES).max(1);
     let mut knn = Vec::new();
-    let mut nb = Vec::new();
-    let mut res: Vec<f64> = (0..points.len())
-        .step_by(step)
-        .filter_map(|i| {
-            nearest_k(&points[i], k, &mut knn);
-            nb.clear();
-            nb.extend(knn.iter().map(|&(j, _)| points[j as usize]));
-            quadric_residual(&nb)
-        })
+    median_quadric_residual((0..points.len()).step_by(step).map(|i| {
+        nearest_k(&points[i], k, &mut knn);
+        knn.iter().map(|&(j, _)| points[j as usize]).collect()
+    }))
+}
+
+/// Median of the quadric-fit residuals ([`quadric_residual`]) of `neighbourhoods` (each a point
+/// and its neighbours; degenerate ones are skipped); 0 when none fits. The noise level σ of a
+/// cloud when the neighbourhoods are about 12 points.
+pub(crate) fn median_quadric_residual(neighbourhoods: impl Iterator<Item = Vec<Point3>>) -> f64 {
+    let mut res: Vec<f64> = neighbourhoods
+        .filter_map(|nb| quadric_residual(&nb))
         .collect();
     if res.is_empty() {
         return 0.0;
