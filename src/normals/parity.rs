@@ -546,6 +546,26 @@ mod tests {
         out.into_iter().unzip()
     }
 
+    /// Parity on one component with `given` normals flips at least `share` of the points `wrong`
+    /// marks (more than 100 of them) and at most 0.5 % of the others.
+    fn assert_wrong_found(
+        p: &[Point3],
+        given: &[Point3],
+        nb: &[Vec<u32>],
+        wrong: impl Fn(&Point3) -> bool,
+        share: f64,
+    ) {
+        let flips = parity_flips(p, given, nb, &vec![0; p.len()]);
+        let expected = p.iter().filter(|q| wrong(q)).count();
+        let right = flips.iter().filter(|&&i| wrong(&p[i as usize])).count();
+        assert!(
+            expected > 100 && right as f64 >= share * expected as f64,
+            "{right} of {expected}"
+        );
+        let others = flips.len() - right;
+        assert!(others <= p.len() / 200, "{others} others of {}", p.len());
+    }
+
     #[test]
     fn wrong_patches_on_a_plate_thinner_than_the_neighbourhood_are_found() {
         // A plate two spacings thick: a point's 12 neighbours reach the other face, and a wrong
@@ -562,19 +582,7 @@ mod tests {
             .map(|(q, n)| if wrong(q) { n.map(|v| -v) } else { *n })
             .collect();
         let nb = neighbours(&p, 12);
-        let flips = parity_flips(&p, &given, &nb, &vec![0; p.len()]);
-        let expected = p.iter().filter(|q| wrong(q)).count();
-        let right = flips.iter().filter(|&&i| wrong(&p[i as usize])).count();
-        assert!(
-            expected > 100 && right * 20 >= expected * 19,
-            "{right} of {expected}"
-        );
-        assert!(
-            flips.len() - right <= p.len() / 200,
-            "{} others of {}",
-            flips.len() - right,
-            p.len()
-        );
+        assert_wrong_found(&p, &given, &nb, wrong, 0.95);
         // Consistent normals: (almost) nothing to flip.
         let none = parity_flips(&p, &truth, &nb, &vec![0; p.len()]);
         assert!(none.len() <= p.len() / 200, "{} of {}", none.len(), p.len());
@@ -618,18 +626,7 @@ mod tests {
             with_noise >= 0.85 && without < RELIABLE_SHARE,
             "clear votes {with_noise} with the noise reach, {without} without"
         );
-        let flips = parity_flips(&p, &given, &nb, &vec![0; p.len()]);
-        let expected = p.iter().filter(|q| wrong(q)).count();
-        let right = flips.iter().filter(|&&i| wrong(&p[i as usize])).count();
-        assert!(
-            expected > 100 && right * 10 >= expected * 9,
-            "{right} of {expected}"
-        );
-        assert!(
-            flips.len() - right <= p.len() / 200,
-            "{} others",
-            flips.len() - right
-        );
+        assert_wrong_found(&p, &given, &nb, wrong, 0.9);
     }
 
     #[test]
