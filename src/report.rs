@@ -212,6 +212,9 @@ pub struct Timings {
     pub read: f64,
     /// Cleaning and normalising.
     pub clean: f64,
+    /// Estimating and orienting normals when the input has none (0 when it has them).
+    #[serde(default)]
+    pub normals: f64,
     /// Building the spatial index and choosing the support.
     pub index: f64,
     /// Fitting the carrier and computing offsets.

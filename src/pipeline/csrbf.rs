@@ -29,7 +29,9 @@ pub fn fit_field(
     let (mut clean, clean_stats, normalization, points) =
         clean_and_normalize(cloud, params, progress, timings)?;
     let point_colors = super::point_colors(&clean, params);
+    let t = Instant::now();
     let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
+    timings.normals = t.elapsed().as_secs_f64();
 
     progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();

@@ -54,9 +54,42 @@ fn a_file_and_its_bytes_give_the_same_mesh_and_a_complete_report() {
     assert!(t.read > 0.0 && t.write > 0.0, "{t:?}");
     // The total is the whole run, measured once: no sum of stages can exceed it.
     assert!(t.total >= t.read + t.polygonize + t.write, "{t:?}");
+    // The kitten has normals: none estimated.
+    assert_eq!(t.normals, 0.0);
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&r2).unwrap()).unwrap();
     assert_eq!(json["timings_s"]["total"].as_f64(), Some(t.total));
     assert!(json["memory"]["peak_rss_mib"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn estimating_normals_is_a_timed_stage_of_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let cloud =
+        rbfsurf::io::read_point_cloud(&common::data("kitten.ply"), &ReadLimits::default()).unwrap();
+    let text: String = cloud
+        .points
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    let (mesh, report) = (dir.path().join("x.glb"), dir.path().join("x.json"));
+    let source = PointSource::Bytes {
+        data: text.as_bytes(),
+        format: PointFormat::Xyz,
+    };
+    let p = ReconParams::default();
+    let r = run(
+        source,
+        &p,
+        &ReadLimits::default(),
+        &output(&mesh, &report),
+        &NoProgress,
+    )
+    .unwrap();
+    let t = &r.report.timings_s;
+    assert!(t.normals > 0.0, "{t:?}");
+    assert!(t.total >= t.normals + t.polygonize, "{t:?}");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["timings_s"]["normals"].as_f64(), Some(t.normals));
 }
 
 #[test]
