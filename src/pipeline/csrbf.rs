@@ -31,7 +31,11 @@ pub fn fit_field(
     let point_colors = super::point_colors(&clean, params);
     let t = Instant::now();
     let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
-    timings.normals = t.elapsed().as_secs_f64();
+    timings.normals = if normals_estimated {
+        t.elapsed().as_secs_f64()
+    } else {
+        0.0
+    };
 
     progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();
