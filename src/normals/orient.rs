@@ -94,14 +94,17 @@ pub fn orient_normals(
         MIN_CONFIDENCE,
         INWARD_WINDING,
     );
-    for i in flip {
-        normals[i as usize] = normals[i as usize].map(|v| -v);
-    }
+    flip_points(&mut normals, &flip);
     let inward = parity_flips(points, &normals, neighbours, &component);
-    for i in inward {
+    flip_points(&mut normals, &inward);
+    normals
+}
+
+/// Flip the normals of the listed points.
+fn flip_points(normals: &mut [Point3], points: &[u32]) {
+    for &i in points {
         normals[i as usize] = normals[i as usize].map(|v| -v);
     }
-    normals
 }
 
 /// Flip every normal whose patch is marked.
