@@ -59,7 +59,7 @@ pub trait ScalarField: Sync {
 
 /// A [`ScalarField`] prepared for evaluations inside one region ([`ScalarField::prepare`]); every
 /// point passed must lie inside that region.
-pub trait RegionField {
+pub trait RegionField: Send {
     /// `out[i] = f(points[i])`, as [`ScalarField::values_in`] over the region.
     fn values(&mut self, points: &[Point3], out: &mut [f64]);
     /// `out[i] = ∇f(points[i])`, as [`ScalarField::gradients_in`] over the region.
@@ -102,6 +102,7 @@ impl Region for Everywhere {
     }
 }
 
+mod adaptive;
 mod band;
 
 mod block;
@@ -111,7 +112,8 @@ mod kuhn;
 pub mod marching_squares;
 mod params;
 mod refine;
+mod tets;
 
 pub use band::DataBand;
 pub use extract::{polygonize, polygonize_in};
-pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats, Seeding};
+pub use params::{Extraction, PolygonizeError, PolygonizeParams, PolygonizeStats, Seeding};

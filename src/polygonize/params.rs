@@ -3,7 +3,7 @@
 use thiserror::Error;
 
 /// How finely and how far the polygonizer may sample the field.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PolygonizeParams {
     /// Grid cells along the longest axis of the domain (default 128; 32–1024 is sensible). The cell edge is
     /// `h = longest domain edge / resolution`; the other axes get as many cells of edge `h` as they need.
@@ -16,6 +16,27 @@ pub struct PolygonizeParams {
     pub refine_steps: usize,
     /// Which tiles the zero set is followed from (default [`Seeding::SignChange`]).
     pub seeding: Seeding,
+    /// The grid the zero set is extracted on (default [`Extraction::Uniform`]).
+    pub extraction: Extraction,
+}
+
+/// The grid the polygonizer extracts the zero set on.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Extraction {
+    /// Every cell of the grid near the surface, marching tetrahedra on the Kuhn split: the
+    /// same mesh whatever the skip test says (see [`super::polygonize_in`]).
+    #[default]
+    Uniform,
+    /// Cubes of two grid cells where the field is close to linear, split into the grid's cells
+    /// where it bends (two-level conforming tetrahedra, see `adaptive.rs`): about a quarter of
+    /// the triangles and field values on flat parts. `tolerance` (normalised units) is the
+    /// largest error of the first-order prediction from a corner of an unsplit cube to its
+    /// centre, in distance (`|Δf| / |∇f|`); the [`Seeding`] does not apply (the seeds are
+    /// probed on tiles of 4 cells).
+    Adaptive {
+        /// Largest prediction error of an unsplit cube, normalised units.
+        tolerance: f64,
+    },
 }
 
 impl Default for PolygonizeParams {
@@ -25,6 +46,7 @@ impl Default for PolygonizeParams {
             max_cells: 1 << 32,
             refine_steps: 2,
             seeding: Seeding::SignChange,
+            extraction: Extraction::Uniform,
         }
     }
 }
