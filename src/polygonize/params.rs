@@ -29,7 +29,7 @@ pub enum Extraction {
     Uniform,
     /// Cubes of two grid cells where the field is close to linear, split into the grid's cells
     /// where it bends (two-level conforming tetrahedra, see `adaptive/mod.rs`). On fields fitted
-    /// to real scans it evaluates 34–50 % fewer field values and makes 12–36 % fewer triangles
+    /// to real scans it evaluates 34–52 % fewer field values and makes 12–36 % fewer triangles
     /// than [`Extraction::Uniform`], but today it takes 1.1–1.6 times as long (its bookkeeping
     /// costs more than the values it saves, `examples/extraction.rs`), so the pipeline does
     /// not use it; the small handles of the raw zero set can differ from the uniform grid's

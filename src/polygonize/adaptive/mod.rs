@@ -22,7 +22,7 @@
 //! The mesh is closed, manifold and consistently oriented wherever the zero set is closed inside
 //! the followed cubes, like the uniform extractor's; where the field is linear over a cube the
 //! mesh has the uniform grid's vertex spacing doubled, elsewhere the uniform grid's resolution.
-//! Measured (`examples/extraction.rs`, fields fitted to six real scans): 34–50 % fewer field
+//! Measured (`examples/extraction.rs`, fields fitted to seven real scans): 34–52 % fewer field
 //! values and 12–36 % fewer triangles than the uniform grid, but 1.1–1.6 times its time: the
 //! probe, the skip tests and the vertex placement cost what they cost there, an unsplit cube's
 //! cone of tetrahedra still makes about 60 % of the fine grid's triangles, and the hash maps and
