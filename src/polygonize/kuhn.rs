@@ -21,16 +21,19 @@ pub(crate) struct TetCase {
     pub tris: [[CubeEdge; 3]; 2],
 }
 
+/// The 6 axis orders `(a, b, c)` of the Kuhn split.
+pub(crate) const ORDERS: [[usize; 3]; 6] = [
+    [0, 1, 2],
+    [0, 2, 1],
+    [1, 0, 2],
+    [1, 2, 0],
+    [2, 0, 1],
+    [2, 1, 0],
+];
+
 /// Corner bits of the 6 Kuhn tetrahedra.
 pub(crate) const TETS: [[u8; 4]; 6] = {
-    let orders = [
-        [0, 1, 2],
-        [0, 2, 1],
-        [1, 0, 2],
-        [1, 2, 0],
-        [2, 0, 1],
-        [2, 1, 0],
-    ];
+    let orders = ORDERS;
     let mut out = [[0u8; 4]; 6];
     let mut t = 0;
     while t < 6 {

@@ -20,15 +20,21 @@
 /// A fine-lattice node (integer coordinates).
 pub(crate) type Node = [i64; 3];
 
-/// The 6 axis orders of a Kuhn split.
-const ORDERS: [[usize; 3]; 6] = [
-    [0, 1, 2],
-    [0, 2, 1],
-    [1, 0, 2],
-    [1, 2, 0],
-    [2, 0, 1],
-    [2, 1, 0],
-];
+use super::kuhn::ORDERS;
+
+/// The 4 cubes (coarse indices, some maybe outside the lattice) around the coarse edge between
+/// nodes `a` and `b` (even coordinates, one axis apart); `None` when `a == b`.
+pub(crate) fn cubes_around_edge(a: Node, b: Node) -> Option<[[i64; 3]; 4]> {
+    let axis = (0..3).find(|&k| a[k] != b[k])?;
+    let lo = [0, 1, 2].map(|k| a[k].min(b[k]) / 2);
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    Some([(0, 0), (1, 0), (0, 1), (1, 1)].map(|(du, dv)| {
+        let mut c = lo;
+        c[u] -= du;
+        c[v] -= dv;
+        c
+    }))
+}
 
 /// The 48 tetrahedra of split cube `o` (its lowest fine node, even coordinates).
 pub(crate) fn split_cube(o: Node, out: &mut Vec<[Node; 4]>) {
@@ -202,17 +208,8 @@ mod tests {
                     && c.iter().all(|x| (0..3).contains(x))
                     && pattern >> i & 1 == 1
             };
-            let split_edge = |a: Node, b: Node| {
-                let axis = (0..3).find(|&k| a[k] != b[k]).unwrap();
-                let lo = [0, 1, 2].map(|k| a[k].min(b[k]) / 2);
-                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-                [(0, 0), (1, 0), (0, 1), (1, 1)].iter().any(|&(du, dv)| {
-                    let mut c = lo;
-                    c[u] -= du;
-                    c[v] -= dv;
-                    split(c)
-                })
-            };
+            let split_edge =
+                |a: Node, b: Node| cubes_around_edge(a, b).unwrap().into_iter().any(split);
             let mut tets = Vec::new();
             for z in 0..3 {
                 for y in 0..3 {

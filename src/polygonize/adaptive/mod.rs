@@ -37,7 +37,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use rayon::prelude::*;
 
 use super::grid::Grid;
-use super::tets::Node;
+use super::tets::{self, Node};
 use super::{PolygonizeError, PolygonizeParams, PolygonizeStats, Region, RegionField, ScalarField};
 use crate::geometry::{Aabb, Point3, TriMesh, dot, norm, sub};
 use crate::progress::Progress;
@@ -224,16 +224,8 @@ fn cubes_between(t0: [i64; 3], t1: [i64; 3]) -> impl Iterator<Item = [i64; 3]> {
 
 /// Whether the coarse edge between corners `a` and `b` is split: one of the cubes around it is.
 fn edge_split(lat: &Lattice, split: &HashSet<u64>, a: Node, b: Node) -> bool {
-    let Some(axis) = (0..3).find(|&k| a[k] != b[k]) else {
-        return false;
-    };
-    let lo = [0, 1, 2].map(|k| a[k].min(b[k]) / 2);
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    [(0, 0), (1, 0), (0, 1), (1, 1)].iter().any(|&(du, dv)| {
-        let mut c = lo;
-        c[u] -= du;
-        c[v] -= dv;
-        lat.has_cube(c) && split.contains(&lat.cube_id(c))
+    tets::cubes_around_edge(a, b).is_some_and(|cubes| {
+        (cubes.into_iter()).any(|c| lat.has_cube(c) && split.contains(&lat.cube_id(c)))
     })
 }
 
