@@ -17,10 +17,10 @@
 //! hanging node, no crack), and marching tetrahedra on it is closed, manifold and consistently
 //! oriented wherever the zero set stays inside the cubes (Doi & Koide 1991 on one level).
 
+use super::kuhn::ORDERS;
+
 /// A fine-lattice node (integer coordinates).
 pub(crate) type Node = [i64; 3];
-
-use super::kuhn::ORDERS;
 
 /// The 4 cubes (coarse indices, some maybe outside the lattice) around the coarse edge between
 /// nodes `a` and `b` (even coordinates, one axis apart); `None` when `a == b`.
@@ -71,15 +71,15 @@ pub(crate) fn cone_cube(
     }
 }
 
-/// The triangles of the face of cube `o` normal to `axis` at offset `side` (0 or 2), as
-/// [`cone_cube`] cuts it.
-fn face_triangles(
+/// The boundary of the face of cube `o` normal to `axis` at offset `side` (0 or 2) as the cubes
+/// beside it cut it: its corners in cyclic order with the midpoints of its split edges between
+/// them, and its centre when one of its edges is split (the fan's apex), else `None`.
+pub(crate) fn face_ring(
     o: Node,
     axis: usize,
     side: i64,
     split_edge: &dyn Fn(Node, Node) -> bool,
-    tris: &mut Vec<[Node; 3]>,
-) {
+) -> (Vec<Node>, Option<Node>) {
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let at = |du: i64, dv: i64| {
         let mut p = o;
@@ -90,23 +90,38 @@ fn face_triangles(
     };
     let q = [at(0, 0), at(2, 0), at(2, 2), at(0, 2)];
     let mut ring = Vec::with_capacity(8);
-    let mut any = false;
     for i in 0..4 {
         let (a, b) = (q[i], q[(i + 1) % 4]);
         ring.push(a);
         if split_edge(a, b) {
             ring.push([0, 1, 2].map(|k| (a[k] + b[k]) / 2));
-            any = true;
         }
     }
-    if !any {
-        tris.push([q[0], q[1], q[2]]);
-        tris.push([q[0], q[2], q[3]]);
-        return;
-    }
-    let fc = at(1, 1);
-    for i in 0..ring.len() {
-        tris.push([fc, ring[i], ring[(i + 1) % ring.len()]]);
+    let centre = (ring.len() > 4).then(|| at(1, 1));
+    (ring, centre)
+}
+
+/// The triangles of the face of cube `o` normal to `axis` at offset `side` (0 or 2), as
+/// [`cone_cube`] cuts it: the fan around its centre over [`face_ring`], or the 2 triangles through
+/// its lowest and highest corners when no edge is split.
+fn face_triangles(
+    o: Node,
+    axis: usize,
+    side: i64,
+    split_edge: &dyn Fn(Node, Node) -> bool,
+    tris: &mut Vec<[Node; 3]>,
+) {
+    let (ring, centre) = face_ring(o, axis, side, split_edge);
+    match centre {
+        None => {
+            tris.push([ring[0], ring[1], ring[2]]);
+            tris.push([ring[0], ring[2], ring[3]]);
+        }
+        Some(fc) => {
+            for i in 0..ring.len() {
+                tris.push([fc, ring[i], ring[(i + 1) % ring.len()]]);
+            }
+        }
     }
 }
 

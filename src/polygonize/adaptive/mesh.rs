@@ -9,7 +9,7 @@ use super::super::refine::{EdgeRoot, place_vertices};
 use super::super::tets::{self, CrossedEdge, Node};
 use super::super::{PolygonizeError, ScalarField};
 use super::edge_split;
-use super::lattice::{Lattice, Samples};
+use super::lattice::{FastMap, Lattice, Samples};
 use crate::geometry::{Point3, TriMesh};
 
 /// Triangles as crossed edges, cubes in id order.
@@ -33,36 +33,37 @@ pub(super) fn triangulate<'a>(
             tets::cone_cube(o, &se, out);
         }
     };
-    // Every node the tetrahedra use was evaluated while following; evaluate any left over.
-    let known = &samples.values;
-    let missing: Vec<Node> = (list.par_chunks(512))
-        .flat_map_iter(|chunk| {
-            let mut tets = Vec::new();
-            chunk.iter().for_each(|c| tets_of(c, &mut tets));
-            let mut m: Vec<Node> = (tets.iter().flatten().copied())
-                .filter(|n| !known.contains_key(&lat.id(*n)))
-                .collect();
-            m.sort_unstable();
-            m.dedup();
-            m
-        })
-        .collect();
-    debug_assert!(missing.is_empty(), "{} nodes not evaluated", missing.len());
-    samples.evaluate(field, lat, &missing, false);
-    let vals = &samples.values;
-    let triangles: EdgeTriangles = (list.par_chunks(512))
-        .flat_map_iter(|chunk| {
-            let (mut tets, mut out) = (Vec::new(), Vec::new());
-            for c in chunk {
-                tets.clear();
-                tets_of(c, &mut tets);
-                for t in &tets {
-                    tets::march(t, t.map(|n| vals[&lat.id(n)]), &mut out);
+    // Every node the tetrahedra use was evaluated while following; a node left over (none is
+    // expected) is evaluated and the pass redone.
+    let march_all = |vals: &FastMap<f64>| -> (EdgeTriangles, Vec<Node>) {
+        let parts: Vec<(EdgeTriangles, Vec<Node>)> = (list.par_chunks(512))
+            .map(|chunk| {
+                let (mut tets, mut out, mut missing) = (Vec::new(), Vec::new(), Vec::new());
+                for c in chunk {
+                    tets.clear();
+                    tets_of(c, &mut tets);
+                    for t in &tets {
+                        match t.map(|n| vals.get(&lat.id(n)).copied()) {
+                            [Some(a), Some(b), Some(c), Some(d)] => {
+                                tets::march(t, [a, b, c, d], &mut out)
+                            }
+                            _ => missing
+                                .extend(t.iter().filter(|n| !vals.contains_key(&lat.id(**n)))),
+                        }
+                    }
                 }
-            }
-            out
-        })
-        .collect();
+                (out, missing)
+            })
+            .collect();
+        let (t, m): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
+        (t.concat(), m.concat())
+    };
+    let (mut triangles, missing) = march_all(&samples.values);
+    debug_assert!(missing.is_empty(), "{} nodes not evaluated", missing.len());
+    if !missing.is_empty() {
+        samples.evaluate(field, lat, &missing, false);
+        triangles = march_all(&samples.values).0;
+    }
     let mut edges: Vec<CrossedEdge> = triangles.iter().flatten().copied().collect();
     edges.par_sort_unstable_by_key(|e| (lat.id(e.0), lat.id(e.1)));
     edges.dedup();

@@ -229,7 +229,8 @@ fn edge_split(lat: &Lattice, split: &HashSet<u64>, a: Node, b: Node) -> bool {
     })
 }
 
-/// The nodes of face (`axis`, `side` 0 | 2) of cube `c` as its tetrahedra use them.
+/// The nodes of face (`axis`, `side` 0 | 2) of cube `c` as its tetrahedra use them
+/// ([`tets::face_ring`]; a split cube's edges are all split).
 fn face_nodes(
     lat: &Lattice,
     split: &HashSet<u64>,
@@ -237,26 +238,10 @@ fn face_nodes(
     axis: usize,
     side: i64,
 ) -> Vec<Node> {
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let at = |du: i64, dv: i64| {
-        let mut p = c.map(|x| 2 * x);
-        p[axis] += side;
-        p[u] += du;
-        p[v] += dv;
-        p
-    };
-    let q = [at(0, 0), at(2, 0), at(2, 2), at(0, 2)];
-    let mut out = q.to_vec();
-    for i in 0..4 {
-        let (a, b) = (q[i], q[(i + 1) % 4]);
-        if edge_split(lat, split, a, b) {
-            out.push([0, 1, 2].map(|k| (a[k] + b[k]) / 2));
-        }
-    }
-    if out.len() > 4 {
-        out.push(at(1, 1));
-    }
-    out
+    let se = |a: Node, b: Node| edge_split(lat, split, a, b);
+    let (mut nodes, centre) = tets::face_ring(c.map(|x| 2 * x), axis, side, &se);
+    nodes.extend(centre);
+    nodes
 }
 
 /// Step 2: the followed cubes (id → split), to the fix point.
