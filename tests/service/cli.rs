@@ -191,13 +191,14 @@ fn kitten_reconstructs_to_a_valid_glb_with_a_full_report() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let mesh = rbfsurf::io::read_mesh(&out).unwrap();
-    // 42,252 grid triangles, 7,590 after the default chord-error simplification (measured).
+    // 42,252 grid triangles, 11,218 after the default chord-error simplification (0.03 spacings,
+    // measured; 7,590 at the earlier 0.05).
     assert!(mesh.triangles.len() > 5_000);
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     let before = v["polygonize"]["triangles_before_simplify"]
         .as_u64()
         .unwrap();
-    assert!(before > 4 * mesh.triangles.len() as u64, "{before}");
+    assert!(before > 3 * mesh.triangles.len() as u64, "{before}");
     for key in [
         "input.points",
         "input.used",

@@ -101,12 +101,28 @@ impl Ball {
 
     /// The vertices within geodesic distance `radius` of `seed` (in `inside`, tree in `parent`).
     pub(super) fn dijkstra(&mut self, mesh: &TriMesh, adj: &Adjacency, seed: u32, radius: f64) {
+        self.dijkstra_from(mesh, adj, &[seed], radius);
+    }
+
+    /// The vertices within geodesic distance `radius` of any of `seeds` (in `inside`, a forest in
+    /// `parent`).
+    pub(super) fn dijkstra_from(
+        &mut self,
+        mesh: &TriMesh,
+        adj: &Adjacency,
+        seeds: &[u32],
+        radius: f64,
+    ) {
         self.reset();
         let p = &mesh.vertices;
         let mut heap = BinaryHeap::new();
-        self.dist[seed as usize] = 0.0;
-        self.reached.push(seed);
-        heap.push(Entry(0.0, seed));
+        for &seed in seeds {
+            if self.dist[seed as usize] > 0.0 {
+                self.dist[seed as usize] = 0.0;
+                self.reached.push(seed);
+                heap.push(Entry(0.0, seed));
+            }
+        }
         while let Some(Entry(d, v)) = heap.pop() {
             if d > self.dist[v as usize] || d > radius {
                 continue;
@@ -250,14 +266,19 @@ pub(super) fn find_loops(mesh: &TriMesh, adj: &Adjacency, seeds: &[u32], radius:
     all
 }
 
-/// A geodesic `spacing`-net of the referenced vertices: every vertex is within `spacing` (along
-/// the edges) of a seed. Greedy in index order (deterministic).
-pub(super) fn net(mesh: &TriMesh, adj: &Adjacency, spacing: f64) -> Vec<u32> {
+/// A geodesic `spacing`-net of the referenced vertices among `vertices` (ascending): every one is
+/// within `spacing` (along the edges) of a seed. Greedy in index order (deterministic).
+pub(super) fn net(
+    mesh: &TriMesh,
+    adj: &Adjacency,
+    spacing: f64,
+    vertices: impl Iterator<Item = u32>,
+) -> Vec<u32> {
     let n = mesh.vertices.len();
     let mut covered = vec![false; n];
     let mut ball = Ball::new(n, adj.tris.len());
     let mut seeds = Vec::new();
-    for v in 0..n as u32 {
+    for v in vertices {
         if covered[v as usize] || adj.neighbours(v).is_empty() {
             continue;
         }
@@ -268,4 +289,16 @@ pub(super) fn net(mesh: &TriMesh, adj: &Adjacency, spacing: f64) -> Vec<u32> {
         }
     }
     seeds
+}
+
+/// The referenced vertices within geodesic distance `radius` of any of `sources`, ascending.
+pub(super) fn around(mesh: &TriMesh, adj: &Adjacency, sources: &[u32], radius: f64) -> Vec<u32> {
+    let mut ball = Ball::new(mesh.vertices.len(), adj.tris.len());
+    let sources: Vec<u32> = (sources.iter().copied())
+        .filter(|&v| !adj.neighbours(v).is_empty())
+        .collect();
+    ball.dijkstra_from(mesh, adj, &sources, radius);
+    let mut inside = std::mem::take(&mut ball.inside);
+    inside.sort_unstable();
+    inside
 }

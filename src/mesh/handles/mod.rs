@@ -44,7 +44,12 @@ pub struct HandleStats {
 /// Most handles cut in one call.
 pub const MAX_CUTS: usize = 256;
 
-/// Rounds of detection (a cut can expose a new short loop nearby).
+/// Rounds of detection (a cut can expose a new short loop nearby). The rounds after the first
+/// search only from the vertices within `max_loop` of the last round's cuts: a loop of at most
+/// `max_loop` through such a vertex lies in one of their balls, and farther away the mesh, the
+/// balls and the descent towards the shortest loop are what the last round saw (a loop it found
+/// separating stays so when a handle elsewhere is cut; one it skipped because a cut touched it
+/// passes through the cut).
 const ROUNDS: usize = 4;
 
 /// Cut every handle of the closed, manifold, oriented `mesh` whose shortest non-separating loop is
@@ -61,6 +66,8 @@ pub fn remove_small_handles(mesh: &mut TriMesh, max_loop: f64) -> HandleStats {
     let start = genus;
     let original = mesh.clone();
     let mut failed: HashSet<Vec<u32>> = HashSet::new();
+    // The vertices the last round's cuts changed; `None` in the first round (search everywhere).
+    let mut changed: Option<Vec<u32>> = None;
     for _ in 0..ROUNDS {
         if genus == 0 || stats.removed >= MAX_CUTS {
             break;
@@ -69,14 +76,24 @@ pub fn remove_small_handles(mesh: &mut TriMesh, max_loop: f64) -> HandleStats {
             break;
         };
         let spacing = max_loop / 2.0;
-        let seeds = net(mesh, &adj, spacing);
+        let seeds = match &changed {
+            None => net(mesh, &adj, spacing, 0..mesh.vertices.len() as u32),
+            // Away from the cuts the balls, their loops and the loops' fates are the last round's:
+            // only loops passing within `max_loop` of a cut can be new (see `ROUNDS`).
+            Some(c) => net(
+                mesh,
+                &adj,
+                spacing,
+                around(mesh, &adj, c, max_loop).into_iter(),
+            ),
+        };
         let mut candidates = find_loops(mesh, &adj, &seeds, max_loop / 2.0 + spacing);
         candidates.retain(|c| !failed.contains(&c.key()));
         if candidates.is_empty() {
             break;
         }
         let before = (mesh.clone(), genus, stats.clone(), failed.clone());
-        let mut cut = cut_loops(
+        let (mut cut, mut touched) = cut_loops(
             mesh,
             adj,
             &candidates,
@@ -93,7 +110,7 @@ pub fn remove_small_handles(mesh: &mut TriMesh, max_loop: f64) -> HandleStats {
             let Some(adj) = Adjacency::new(mesh) else {
                 break;
             };
-            cut = cut_loops(
+            (cut, touched) = cut_loops(
                 mesh,
                 adj,
                 &candidates,
@@ -107,6 +124,7 @@ pub fn remove_small_handles(mesh: &mut TriMesh, max_loop: f64) -> HandleStats {
         if cut == 0 {
             break;
         }
+        changed = Some(touched);
     }
     // Each cut was checked locally (two simple borders, Euler characteristic up by 2); the whole
     // mesh is checked once more.
@@ -130,7 +148,8 @@ enum Cuts {
 }
 
 /// Cuts the non-separating loops among `candidates` (shortest first) while the genus is
-/// positive; returns how many. `mesh.triangles` must be `adj.tris` on entry.
+/// positive; returns how many, and the vertices the cuts changed (the removed bands' and the
+/// caps' centres), ascending. `mesh.triangles` must be `adj.tris` on entry.
 #[allow(clippy::too_many_arguments)]
 fn cut_loops(
     mesh: &mut TriMesh,
@@ -141,7 +160,7 @@ fn cut_loops(
     genus: &mut i64,
     failed: &mut HashSet<Vec<u32>>,
     stats: &mut HandleStats,
-) -> usize {
+) -> (usize, Vec<u32>) {
     let mut touched = vec![false; mesh.vertices.len()];
     let mut dead = vec![false; adj.tris.len()];
     let mut cut = 0;
@@ -185,7 +204,10 @@ fn cut_loops(
         }
     }
     compact(mesh, &mut dead);
-    cut
+    let changed = (0..touched.len() as u32)
+        .filter(|&v| touched[v as usize])
+        .collect();
+    (cut, changed)
 }
 
 /// Drops the triangles flagged in `dead` (the first `dead.len()` of the mesh; the caps after
@@ -393,4 +415,4 @@ mod ball;
 mod tests;
 
 use adjacency::Adjacency;
-use ball::{Ball, find_loops, net};
+use ball::{Ball, around, find_loops, net};

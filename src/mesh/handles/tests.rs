@@ -86,3 +86,42 @@ fn the_cut_is_the_same_whatever_the_thread_count() {
     assert_eq!(a.0.removed, 2);
     assert_eq!(a, b);
 }
+
+#[test]
+fn the_region_around_several_sources_is_the_union_of_their_balls() {
+    let m = torus(1.0, 0.3, 48, 16);
+    let adj = Adjacency::new(&m).unwrap();
+    let sources = [0u32, 5, 300, 301, 700];
+    let radius = 0.45;
+    let region = around(&m, &adj, &sources, radius);
+    // Brute force: one Dijkstra per source, the union of what each reaches.
+    let mut ball = Ball::new(m.vertices.len(), adj.tris.len());
+    let mut union: Vec<u32> = Vec::new();
+    for &s in &sources {
+        ball.dijkstra(&m, &adj, s, radius);
+        union.extend(&ball.inside);
+    }
+    union.sort_unstable();
+    union.dedup();
+    assert_eq!(region, union);
+    assert!(region.len() > sources.len() && region.len() < m.vertices.len());
+}
+
+#[test]
+fn thin_handles_side_by_side_are_all_cut() {
+    // Five thin tori in a row, 0.17 apart at their closest (nearer than a ball's radius): one cut
+    // each, checked together, and no later round undoes or repeats one.
+    let mut m = torus(0.5, 0.04, 64, 10);
+    for k in 1..5 {
+        m = merge(
+            &m,
+            &shifted(torus(0.5, 0.04, 64, 10), [1.25 * k as f64, 0.0, 0.0]),
+        );
+    }
+    assert_eq!(analyze(&m).genus, Some(5));
+    let s = remove_small_handles(&mut m, 0.5);
+    assert_eq!((s.removed, s.kept), (5, 0), "{s:?}");
+    let t = analyze(&m);
+    assert!(t.watertight && t.manifold && t.oriented, "{t:?}");
+    assert_eq!((t.genus, t.components), (Some(0), 5), "{t:?}");
+}
