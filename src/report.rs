@@ -298,6 +298,12 @@ pub struct PolygonizeReport {
     /// Seconds spent finding and cutting handles (part of `timings_s.polygonize`; of
     /// `timings_s.post` out of core).
     pub handles_s: f64,
+    /// Seconds spent extracting the zero set on the grid (part of `timings_s.polygonize`; 0 out
+    /// of core, where the tiles' extraction is spread over the task graph).
+    pub extract_s: f64,
+    /// Seconds spent simplifying to the chord error and measuring it (part of
+    /// `timings_s.polygonize`; 0 out of core).
+    pub simplify_s: f64,
     /// Short non-separating loops found but left (the cut would not have given a closed
     /// manifold one genus lower).
     pub handles_kept: usize,

@@ -126,8 +126,8 @@ fn simplify_whole(
         .collect();
     let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
     let options = meshopt::SimplifyOptions::ErrorAbsolute | meshopt::SimplifyOptions::LockBorder;
-    let original_border = border_edges(&mesh.triangles);
-    let pieces = vertex_components(mesh);
+    // Needed only after an attempt that changed the topology: computed then, once.
+    let (mut original_border, mut pieces) = (None, None);
     let mut tol = tolerance;
     let mut scale = LOCK_SCALE_FIRST;
     for _ in 0..ATTEMPTS {
@@ -156,9 +156,11 @@ fn simplify_whole(
                 mesh.triangles = probe.triangles;
                 return stats;
             }
+            let original_border =
+                original_border.get_or_insert_with(|| border_edges(&mesh.triangles));
             let mut local = false;
             while let Some(changed) =
-                lock_around_defects(mesh, &probe.triangles, &original_border, &mut locks, scale)
+                lock_around_defects(mesh, &probe.triangles, original_border, &mut locks, scale)
             {
                 local = changed;
                 if changed || scale >= LOCK_SCALE_MAX {
@@ -167,7 +169,8 @@ fn simplify_whole(
                 scale *= 2.0;
             }
             scale = (scale * 2.0).min(LOCK_SCALE_MAX);
-            let vanished = lock_vanished_components(&pieces, &probe.triangles, &mut locks);
+            let pieces = pieces.get_or_insert_with(|| vertex_components(mesh));
+            let vanished = lock_vanished_components(pieces, &probe.triangles, &mut locks);
             if !(local || vanished) {
                 break;
             }
@@ -319,10 +322,10 @@ fn simplify_piece(
 /// characteristic) without any defect to lock around.
 fn pinch_rings(triangles: &[[u32; 3]], vertices: usize) -> Vec<bool> {
     let mut border = vec![0u32; vertices];
-    for (e, n) in edge_uses(triangles) {
-        if n == 1 {
-            border[e.0 as usize] += 1;
-            border[e.1 as usize] += 1;
+    for e in crate::mesh::topology::collect_edges(triangles) {
+        if e.forward + e.backward == 1 {
+            border[e.lo as usize] += 1;
+            border[e.hi as usize] += 1;
         }
     }
     let mut locks = vec![false; vertices];

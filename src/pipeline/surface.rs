@@ -111,7 +111,9 @@ pub(crate) fn extract_surface(
     } else {
         &Everywhere
     };
+    let t = std::time::Instant::now();
     let (mut mesh, stats) = polygonize_in(fit.field.as_ref(), domain, &pp, region, progress)?;
+    s.extract_s = t.elapsed().as_secs_f64();
     s.cells_total = stats.cells_total;
     s.blocks_total = stats.blocks_total;
     s.blocks_active = stats.blocks_active;
@@ -135,7 +137,9 @@ pub(crate) fn extract_surface(
     let (drop, n) = trim::small_components(&mesh, params.min_component);
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
+    let t = std::time::Instant::now();
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
+    s.simplify_s = t.elapsed().as_secs_f64();
     if !open {
         cut_small_handles(&mut mesh, params, fit.support_radius, &mut s);
     }
