@@ -16,7 +16,7 @@
 
 use crate::geometry::TriMesh;
 use crate::mesh::topology::{MeshTopology, analyze};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 /// Tolerances tried: the given one, then halved each time.
 pub const ATTEMPTS: usize = 3;
@@ -322,10 +322,10 @@ fn simplify_piece(
 /// characteristic) without any defect to lock around.
 fn pinch_rings(triangles: &[[u32; 3]], vertices: usize) -> Vec<bool> {
     let mut border = vec![0u32; vertices];
-    for e in crate::mesh::topology::collect_edges(triangles) {
-        if e.forward + e.backward == 1 {
-            border[e.lo as usize] += 1;
-            border[e.hi as usize] += 1;
+    for (e, n) in edge_uses(triangles) {
+        if n == 1 {
+            border[e.0 as usize] += 1;
+            border[e.1 as usize] += 1;
         }
     }
     let mut locks = vec![false; vertices];
@@ -398,8 +398,8 @@ const LOCK_SCALE_FIRST: f64 = 0.25;
 /// Largest lock radius, in longest simplified edges at the defect.
 const LOCK_SCALE_MAX: f64 = 2.0;
 
-/// Undirected edges used by exactly one triangle.
-fn border_edges(triangles: &[[u32; 3]]) -> HashSet<(u32, u32)> {
+/// Undirected edges used by exactly one triangle, ascending.
+fn border_edges(triangles: &[[u32; 3]]) -> Vec<(u32, u32)> {
     edge_uses(triangles)
         .into_iter()
         .filter(|&(_, n)| n == 1)
@@ -445,16 +445,11 @@ fn lock_vanished_components(pieces: &[u32], triangles: &[[u32; 3]], locks: &mut 
     changed
 }
 
-/// Uses of every undirected edge.
-fn edge_uses(triangles: &[[u32; 3]]) -> HashMap<(u32, u32), u32> {
-    let mut uses = HashMap::with_capacity(triangles.len() * 2);
-    for t in triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-        }
-    }
-    uses
+/// Uses of every undirected edge `(lo, hi)`, ascending ([`crate::mesh::topology`]'s grouping).
+fn edge_uses(triangles: &[[u32; 3]]) -> Vec<((u32, u32), u32)> {
+    (crate::mesh::topology::collect_edges(triangles).into_iter())
+        .map(|e| ((e.lo, e.hi), e.forward + e.backward))
+        .collect()
 }
 
 /// Locks every vertex of `mesh` near a defect of the simplified `triangles` (an edge used three
@@ -464,7 +459,7 @@ fn edge_uses(triangles: &[[u32; 3]]) -> HashMap<(u32, u32), u32> {
 fn lock_around_defects(
     mesh: &TriMesh,
     triangles: &[[u32; 3]],
-    original_border: &HashSet<(u32, u32)>,
+    original_border: &[(u32, u32)],
     locks: &mut [bool],
     scale: f64,
 ) -> Option<bool> {
@@ -473,8 +468,8 @@ fn lock_around_defects(
         crate::geometry::dist2(mesh.vertices[a as usize], mesh.vertices[b as usize]).sqrt()
     };
     let uses = edge_uses(triangles);
-    for (&e, &n) in &uses {
-        if n >= 3 || (n == 1 && !original_border.contains(&e)) {
+    for &(e, n) in &uses {
+        if n >= 3 || (n == 1 && original_border.binary_search(&e).is_err()) {
             for v in [e.0, e.1] {
                 let r = reach.entry(v).or_insert(0.0);
                 *r = r.max(length(e));
@@ -484,7 +479,8 @@ fn lock_around_defects(
     // A border edge of the input that two triangles now share (a collapse zipped two border
     // stretches together: a loop splits, no new border edge shows it).
     for &e in original_border {
-        if uses.get(&e).is_some_and(|&n| n != 1) {
+        let now = uses.binary_search_by_key(&e, |u| u.0).map(|i| uses[i].1);
+        if now.is_ok_and(|n| n != 1) {
             for v in [e.0, e.1] {
                 let r = reach.entry(v).or_insert(0.0);
                 *r = r.max(length(e));
