@@ -239,7 +239,7 @@ const MIN_SURFACE_BREADTH: f64 = 0.01;
 /// refused earlier by [`check_degenerate`]). Neighbours come from `nearest_k`.
 pub fn check_local_shape(
     points: &[Point3],
-    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync,
 ) -> Result<(), InputError> {
     let shape = crate::geometry::pca::local_shape(points, nearest_k);
     let n = points.len();

@@ -116,8 +116,9 @@ pub struct LocalShape {
 /// (thickness 0, breadth ½). `O(s · k log n)`.
 pub fn local_shape(
     points: &[Point3],
-    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync,
 ) -> LocalShape {
+    use rayon::prelude::*;
     let mut shape = LocalShape {
         thickness: 0.0,
         breadth: 0.5,
@@ -128,23 +129,25 @@ pub fn local_shape(
     }
     shape.thickness = f64::INFINITY;
     let step = (points.len() / 600).max(1);
-    let mut knn = Vec::new();
-    let mut nb = Vec::new();
+    let samples: Vec<usize> = (0..points.len()).step_by(step).collect();
     for &k in THICKNESS_SCALES.iter().filter(|&&k| 8 * k <= points.len()) {
-        let (mut thin, mut broad): (Vec<f64>, Vec<f64>) = (0..points.len())
-            .step_by(step)
-            .map(|i| {
-                nearest_k(&points[i], k, &mut knn);
-                nb.clear();
-                nb.extend(knn.iter().map(|&(j, _)| points[j as usize]));
-                let v = pca(&nb).variances;
-                let total = v[0] + v[1] + v[2];
-                if total > 0.0 {
-                    (v[2] / total, v[1] / total)
-                } else {
-                    (0.0, 0.0)
-                }
-            })
+        let (mut thin, mut broad): (Vec<f64>, Vec<f64>) = samples
+            .par_iter()
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(knn, nb), &i| {
+                    nearest_k(&points[i], k, knn);
+                    nb.clear();
+                    nb.extend(knn.iter().map(|&(j, _)| points[j as usize]));
+                    let v = pca(nb).variances;
+                    let total = v[0] + v[1] + v[2];
+                    if total > 0.0 {
+                        (v[2] / total, v[1] / total)
+                    } else {
+                        (0.0, 0.0)
+                    }
+                },
+            )
             .unzip();
         let mid = thin.len() / 2;
         let median = |v: &mut Vec<f64>| *v.select_nth_unstable_by(mid, f64::total_cmp).1;
@@ -161,7 +164,7 @@ mod tests {
     use crate::geometry::synthetic::{Shape, SplitMix64};
     use crate::geometry::{cross, dist2, dot, norm};
 
-    fn brute_knn(points: &[Point3]) -> impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + '_ {
+    fn brute_knn(points: &[Point3]) -> impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync + '_ {
         move |p, k, out| {
             out.clear();
             out.extend((0..points.len() as u32).map(|j| (j, dist2(*p, points[j as usize]).sqrt())));

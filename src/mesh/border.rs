@@ -35,14 +35,7 @@ pub fn make_manifold(mesh: &mut TriMesh) -> usize {
 /// Per triangle: `true` for the third and later triangles (by index) on an edge; and the triangle
 /// count of its edge-connected piece (triangles joined through shared edges).
 fn crowded_edges(triangles: &[[u32; 3]]) -> (Vec<bool>, Vec<u32>) {
-    let mut half: Vec<(u64, u32)> = Vec::with_capacity(triangles.len() * 3);
-    for (ti, t) in triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            half.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), ti as u32));
-        }
-    }
-    half.par_sort_unstable();
+    let half = super::topology::sorted_half_edges(triangles);
     let mut drop = vec![false; triangles.len()];
     let mut uf = UnionFind::new(triangles.len());
     for (i, &(edge, ti)) in half.iter().enumerate() {

@@ -37,6 +37,17 @@ pub struct ComponentSupport {
 /// for no component.
 pub fn component_support(mesh: &TriMesh, points: &[Point3], max_distance: f64) -> ComponentSupport {
     let (labels, triangles) = triangle_components(mesh);
+    support_of(mesh, (labels, triangles), points, max_distance)
+}
+
+/// [`component_support`] for the components `(labels, triangles)` of
+/// [`triangle_components`]`(mesh)`.
+fn support_of(
+    mesh: &TriMesh,
+    (labels, triangles): (Vec<u32>, Vec<usize>),
+    points: &[Point3],
+    max_distance: f64,
+) -> ComponentSupport {
     let mut vertex_label = vec![u32::MAX; mesh.vertices.len()];
     for (t, &c) in mesh.triangles.iter().zip(&labels) {
         for &v in t {
@@ -86,7 +97,12 @@ pub fn floaters(
     if min_share <= 0.0 || mesh.triangles.is_empty() {
         return (vec![false; mesh.triangles.len()], 0);
     }
-    let s = component_support(mesh, points, max_distance);
+    let components = triangle_components(mesh);
+    if components.1.len() < 2 {
+        // The one component is the best supported one: never a floater.
+        return (vec![false; mesh.triangles.len()], 0);
+    }
+    let s = support_of(mesh, components, points, max_distance);
     let need = min_share * points.len() as f64;
     let best = (0..s.points.len()).fold(0, |b, c| if s.points[c] > s.points[b] { c } else { b });
     let candidate: Vec<bool> = (0..s.points.len())

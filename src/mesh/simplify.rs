@@ -91,14 +91,16 @@ fn signature(t: &MeshTopology) -> impl PartialEq + std::fmt::Debug {
 /// assert!(stats.triangles_after < 128 && stats.triangles_after == mesh.triangles.len());
 /// ```
 pub fn simplify_to_tolerance(mesh: &mut TriMesh, tolerance: f64) -> SimplifyStats {
-    let before = analyze(mesh);
-    if mesh.triangles.len() >= PIECE_TRIANGLES * 2
-        && tolerance.is_finite()
-        && tolerance > 0.0
-        && let Some(stats) = simplify_in_pieces(mesh, tolerance, &before)
-    {
-        return stats;
+    if mesh.triangles.len() >= PIECE_TRIANGLES * 2 && tolerance.is_finite() && tolerance > 0.0 {
+        // The input's topology is needed only once the pieces are done: measured meanwhile.
+        let (before, pieces) = rayon::join(|| analyze(mesh), || first_pass(mesh, tolerance));
+        if let Some(stats) = simplify_in_pieces(mesh, tolerance, &before, pieces) {
+            return stats;
+        }
+        let locks = vec![false; mesh.vertices.len()];
+        return simplify_whole(mesh, tolerance, &before, locks);
     }
+    let before = analyze(mesh);
     let locks = vec![false; mesh.vertices.len()];
     simplify_whole(mesh, tolerance, &before, locks)
 }
@@ -203,19 +205,10 @@ fn simplify_in_pieces(
     mesh: &mut TriMesh,
     tolerance: f64,
     before: &MeshTopology,
+    (pieces, mut done): FirstPass,
 ) -> Option<SimplifyStats> {
     use rayon::prelude::*;
-    let mut levels = 0;
-    while PIECE_TRIANGLES << (levels + 1) <= mesh.triangles.len() && 1 << (levels + 1) <= MAX_PIECES
-    {
-        levels += 1;
-    }
-    let pieces = split_pieces(&mesh.vertices, &mesh.triangles, levels);
     let mut locks = vec![false; mesh.vertices.len()];
-    let mut done: Vec<(Vec<[u32; 3]>, SimplifyStats)> = pieces
-        .par_iter()
-        .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance, &locks))
-        .collect();
     let mut original_border = None;
     for _ in 0..SEAM_ROUNDS {
         let triangles: Vec<[u32; 3]> = done.iter().flat_map(|d| d.0.iter().copied()).collect();
@@ -266,6 +259,28 @@ fn simplify_in_pieces(
         }
     }
     None
+}
+
+/// The pieces of [`simplify_in_pieces`] and each one simplified alone, nothing locked beyond
+/// its border.
+type FirstPass = (Vec<Vec<[u32; 3]>>, Vec<(Vec<[u32; 3]>, SimplifyStats)>);
+
+/// Splits `mesh` into pieces of about [`PIECE_TRIANGLES`] (at most [`MAX_PIECES`]) and simplifies
+/// each alone, in parallel.
+fn first_pass(mesh: &TriMesh, tolerance: f64) -> FirstPass {
+    use rayon::prelude::*;
+    let mut levels = 0;
+    while PIECE_TRIANGLES << (levels + 1) <= mesh.triangles.len() && 1 << (levels + 1) <= MAX_PIECES
+    {
+        levels += 1;
+    }
+    let pieces = split_pieces(&mesh.vertices, &mesh.triangles, levels);
+    let locks = vec![false; mesh.vertices.len()];
+    let done = pieces
+        .par_iter()
+        .map(|piece| simplify_piece(&mesh.vertices, piece, tolerance, &locks))
+        .collect();
+    (pieces, done)
 }
 
 /// Rounds of [`simplify_in_pieces`] that lock around defects where the pieces meet.
@@ -347,36 +362,37 @@ fn split_pieces(
     triangles: &[[u32; 3]],
     levels: usize,
 ) -> Vec<Vec<[u32; 3]>> {
+    use rayon::prelude::*;
     let centroid = |t: &[u32; 3]| {
         [0, 1, 2].map(|k| t.iter().map(|&v| vertices[v as usize][k]).sum::<f64>() / 3.0)
     };
     let mut pieces: Vec<Vec<(crate::geometry::Point3, usize)>> = vec![
         triangles
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(i, t)| (centroid(t), i))
             .collect(),
     ];
     for _ in 0..levels {
-        let mut next = Vec::with_capacity(pieces.len() * 2);
-        for mut p in pieces {
-            let bbox = crate::geometry::Aabb::from_points(p.iter().map(|c| &c.0));
-            let e = bbox.extent();
-            let axis = (0..3).fold(0, |a, k| if e[k] > e[a] { k } else { a });
-            let at = p.len() / 2;
-            if at > 0 {
-                p.select_nth_unstable_by(at, |a, b| {
-                    a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
-                });
-            }
-            let high = p.split_off(at);
-            next.push(p);
-            next.push(high);
-        }
-        pieces = next;
+        pieces = pieces
+            .into_par_iter()
+            .flat_map_iter(|mut p| {
+                let bbox = crate::geometry::Aabb::from_points(p.iter().map(|c| &c.0));
+                let e = bbox.extent();
+                let axis = (0..3).fold(0, |a, k| if e[k] > e[a] { k } else { a });
+                let at = p.len() / 2;
+                if at > 0 {
+                    p.select_nth_unstable_by(at, |a, b| {
+                        a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
+                    });
+                }
+                let high = p.split_off(at);
+                [p, high]
+            })
+            .collect();
     }
     pieces
-        .into_iter()
+        .into_par_iter()
         .map(|p| {
             let mut ids: Vec<usize> = p.into_iter().map(|c| c.1).collect();
             ids.sort_unstable();

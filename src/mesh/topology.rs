@@ -204,6 +204,43 @@ pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
     edges
 }
 
+/// Every half-edge as `(lo << 32 | hi, triangle)` (the undirected edge's key and the triangle
+/// using it), sorted: the order of a comparison sort of those pairs, by a counting sort on the
+/// lower vertex and a sort of each vertex's few half-edges (`O(F)`).
+pub(crate) fn sorted_half_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
+    let n = (triangles.iter().flatten()).fold(0, |m, &v| m.max(v as usize + 1));
+    let mut start = vec![0usize; n + 1];
+    for t in triangles {
+        for k in 0..3 {
+            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    // The higher vertex and the triangle of each half-edge, packed `hi << 32 | triangle`.
+    let mut upper = vec![0u64; start[n]];
+    let mut fill = start.clone();
+    for (ti, t) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let lo = a.min(b) as usize;
+            upper[fill[lo]] = (u64::from(a.max(b)) << 32) | ti as u64;
+            fill[lo] += 1;
+        }
+    }
+    let mut half = Vec::with_capacity(upper.len());
+    for lo in 0..n {
+        let bucket = &mut upper[start[lo]..start[lo + 1]];
+        bucket.sort_unstable();
+        half.extend(bucket.iter().map(|&x| {
+            let hi = x >> 32;
+            (((lo as u64) << 32) | hi, x as u32)
+        }));
+    }
+    half
+}
+
 /// Number of vertices whose incident triangles do not form a single edge-connected fan.
 fn count_non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> usize {
     let mut start = vec![0u32; n + 1];
@@ -556,6 +593,30 @@ mod tests {
             "genus",
         ] {
             assert!(json.get(key).is_some(), "{key}");
+        }
+    }
+
+    #[test]
+    fn half_edges_come_sorted_like_a_comparison_sort() {
+        let mut odd = cube([0.0; 3], 1.0);
+        odd.triangles.push(odd.triangles[3]);
+        odd.triangles.swap(0, 7);
+        let fan = [[0u32, 1, 2], [0, 1, 3], [1, 0, 4], [7, 8, 9], [9, 8, 7]];
+        for triangles in [
+            torus(1.0, 0.3, 24, 12).triangles,
+            odd.triangles,
+            fan.to_vec(),
+            Vec::new(),
+        ] {
+            let mut want: Vec<(u64, u32)> = Vec::new();
+            for (ti, t) in triangles.iter().enumerate() {
+                for k in 0..3 {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    want.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), ti as u32));
+                }
+            }
+            want.sort_unstable();
+            assert_eq!(sorted_half_edges(&triangles), want);
         }
     }
 

@@ -31,14 +31,7 @@ pub fn unsupported_triangles(mesh: &TriMesh, points: &[Point3], max_distance: f6
 /// how many triangles were un-flagged. `O(t log t)`.
 pub fn keep_enclosed_holes(mesh: &TriMesh, drop: &mut [bool]) -> usize {
     let t = mesh.triangles.len();
-    let mut half: Vec<(u64, u32)> = Vec::with_capacity(3 * t);
-    for (ti, tri) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            half.push(((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), ti as u32));
-        }
-    }
-    half.sort_unstable();
+    let half = super::topology::sorted_half_edges(&mesh.triangles);
     let mut uf = super::topology::UnionFind::new(t);
     // Per region root (after all unions): touches a border / touches a kept triangle.
     let mut pairs: Vec<(u32, u32)> = Vec::new();

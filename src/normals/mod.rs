@@ -45,24 +45,29 @@ pub fn inconsistent_fraction(
     points: &[Point3],
     normals: &[Point3],
     k: usize,
-    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync,
 ) -> f64 {
+    use rayon::prelude::*;
     let step = (points.len() / 4000).max(1);
-    let (mut bad, mut total) = (0usize, 0usize);
-    let mut knn = Vec::new();
-    for i in (0..points.len()).step_by(step) {
-        nearest_k(&points[i], k + 1, &mut knn);
-        for &(j, _) in knn.iter().filter(|(j, _)| *j as usize != i) {
-            let (a, b) = (normals[i], normals[j as usize]);
-            let (na, nb) = (norm(a), norm(b));
-            if na > 0.0 && nb > 0.0 {
-                total += 1;
-                if dot(a, b) < -0.5 * na * nb {
-                    bad += 1;
+    let samples: Vec<usize> = (0..points.len()).step_by(step).collect();
+    let (bad, total) = samples
+        .par_iter()
+        .map_init(Vec::new, |knn, &i| {
+            nearest_k(&points[i], k + 1, knn);
+            let (mut bad, mut total) = (0usize, 0usize);
+            for &(j, _) in knn.iter().filter(|(j, _)| *j as usize != i) {
+                let (a, b) = (normals[i], normals[j as usize]);
+                let (na, nb) = (norm(a), norm(b));
+                if na > 0.0 && nb > 0.0 {
+                    total += 1;
+                    if dot(a, b) < -0.5 * na * nb {
+                        bad += 1;
+                    }
                 }
             }
-        }
-    }
+            (bad, total)
+        })
+        .reduce(|| (0, 0), |x, y| (x.0 + y.0, x.1 + y.1));
     bad as f64 / total.max(1) as f64
 }
 

@@ -192,9 +192,19 @@ fn reconstruct_inner(
     for v in &mut mesh.vertices {
         *v = fit.normalization.inverse(v);
     }
-    crate::mesh::optimize::optimize_for_gpu(&mut mesh)?;
+    // The topology does not depend on the order of triangles and vertices: measured on a copy
+    // while the mesh is reordered.
+    let copy = TriMesh {
+        vertices: mesh.vertices.clone(),
+        triangles: mesh.triangles.clone(),
+        ..TriMesh::default()
+    };
+    let (topology, optimized) = rayon::join(
+        || crate::mesh::topology::analyze(&copy),
+        || crate::mesh::optimize::optimize_for_gpu(&mut mesh),
+    );
+    optimized?;
     let attributes = color_mesh(&mut mesh, &fit, cloud)?;
-    let topology = crate::mesh::topology::analyze(&mesh);
     timings.post = t.elapsed().as_secs_f64();
     timings.total = start.elapsed().as_secs_f64();
     let report = Report {

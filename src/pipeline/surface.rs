@@ -250,7 +250,7 @@ fn unsupported_share(
     let reach = fit.support_radius + 3f64.sqrt() * longest / cells as f64;
     let (drop, _) = floaters::floaters(&mesh, &fit.points, reach, params.min_support);
     trim::remove_triangles(&mut mesh, &drop);
-    if crate::mesh::analyze(&mesh).boundary_edges > 0 {
+    if crate::mesh::topology::has_boundary_edge(&mesh.triangles) {
         // The carrier's surface leaves the domain: closing it would keep a sheet out to the box.
         return Ok(1.0);
     }

@@ -50,7 +50,7 @@ pub struct NoiseEstimate {
 pub fn estimate_noise(
     points: &[Point3],
     spacing: f64,
-    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+    nearest_k: impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync,
 ) -> NoiseEstimate {
     if points.len() < 4 * LARGE_K || spacing.is_nan() || spacing <= 0.0 {
         return NoiseEstimate::default();
@@ -81,23 +81,35 @@ pub fn estimate_noise(
 fn median_residual(
     points: &[Point3],
     k: usize,
-    nearest_k: &impl Fn(&Point3, usize, &mut Vec<(u32, f64)>),
+    nearest_k: &(impl Fn(&Point3, usize, &mut Vec<(u32, f64)>) + Sync),
 ) -> f64 {
+    use rayon::prelude::*;
     let step = (points.len() / SAMPLES).max(1);
-    let mut knn = Vec::new();
-    median_quadric_residual((0..points.len()).step_by(step).map(|i| {
-        nearest_k(&points[i], k, &mut knn);
-        knn.iter().map(|&(j, _)| points[j as usize]).collect()
-    }))
+    let samples: Vec<usize> = (0..points.len()).step_by(step).collect();
+    let res: Vec<Option<f64>> = samples
+        .par_iter()
+        .map_init(Vec::new, |knn, &i| {
+            nearest_k(&points[i], k, knn);
+            let nb: Vec<Point3> = knn.iter().map(|&(j, _)| points[j as usize]).collect();
+            quadric_residual(&nb)
+        })
+        .collect();
+    median_of(res.into_iter().flatten().collect())
 }
 
 /// Median of the quadric-fit residuals ([`quadric_residual`]) of `neighbourhoods` (each a point
 /// and its neighbours; degenerate ones are skipped); 0 when none fits. The noise level σ of a
 /// cloud when the neighbourhoods are about 12 points.
 pub(crate) fn median_quadric_residual(neighbourhoods: impl Iterator<Item = Vec<Point3>>) -> f64 {
-    let mut res: Vec<f64> = neighbourhoods
-        .filter_map(|nb| quadric_residual(&nb))
-        .collect();
+    median_of(
+        neighbourhoods
+            .filter_map(|nb| quadric_residual(&nb))
+            .collect(),
+    )
+}
+
+/// The median (upper middle) of `res`; 0 when empty.
+fn median_of(mut res: Vec<f64>) -> f64 {
     if res.is_empty() {
         return 0.0;
     }
