@@ -45,8 +45,8 @@ pub enum Stage {
 const RECONSTRUCTION: [(Stage, f64); 12] = [
     (Stage::Read, 0.02),
     (Stage::Clean, 0.02),
-    (Stage::Normals, 0.03),
     (Stage::Index, 0.03),
+    (Stage::Normals, 0.03),
     (Stage::Carrier, 0.03),
     (Stage::Assemble, 0.10),
     (Stage::Order, 0.05),

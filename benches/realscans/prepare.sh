@@ -9,14 +9,14 @@
 #   BUNNY_GIT    git dir of a snapshot of github.com/dengnantianjie/3dcoursework (holds Stanford's
 #                bunny/data/ range images unchanged); default /work/.mirror/dengnantianjie+3dcoursework/repo
 #                (the search tool's `fetch github:dengnantianjie/3dcoursework` puts it there). Without
-#                it the two bun000 inputs are skipped.
+#                it the Stanford inputs (bun000, the ten merged views) are skipped.
 #   OUT          output folder (default target/realscans)
 #
 # Provenance and licences (nothing third-party is committed; see benches/realscans/README.md):
 #   - CGAL data (Debian package libcgal-demo 5.5.1-2, usr/share/doc/libcgal-dev/data.tar.gz):
 #     Debian's copyright file for CGAL: files without an explicit copyright notice are CC0-1.0.
 #   - ../shared/data: copies of the same CGAL data (CC0-1.0), see shared/data/README.md.
-#   - bun000.ply: Stanford 3D Scanning Repository, bunny range data (Cyberware 3030MS, 1996);
+#   - bun000.ply … top3.ply, bun.conf: Stanford 3D Scanning Repository, bunny range data (Cyberware 3030MS, 1996);
 #     Stanford's terms: free use and redistribution for research, acknowledge the source, no
 #     commercial use without permission. Checked by SHA-256 below.
 #   - torus: `rbfsurf generate` (our own).
@@ -53,13 +53,27 @@ if [[ ! -d $cache/cgal/data/meshes ]]; then
   rm -rf "$cache/deb"
 fi
 
-# 2. Stanford bunny range image
+# 2. Stanford bunny range images: bun000 alone, and all ten views with their registration
 stanford=-
 if git --git-dir="$BUNNY_GIT" cat-file -e "$BUNNY_COMMIT:bunny/data/bun000.ply" 2> /dev/null; then
   mkdir -p "$cache/stanford"
-  git --git-dir="$BUNNY_GIT" show "$BUNNY_COMMIT:bunny/data/bun000.ply" > "$cache/stanford/bun000.ply"
-  echo "$BUN000_SHA  $cache/stanford/bun000.ply" | sha256sum -c --quiet - \
-    || { echo "checksum mismatch: bun000.ply" >&2; exit 1; }
+  while read -r sha file; do
+    git --git-dir="$BUNNY_GIT" show "$BUNNY_COMMIT:bunny/data/$file" > "$cache/stanford/$file"
+    echo "$sha  $cache/stanford/$file" | sha256sum -c --quiet - \
+      || { echo "checksum mismatch: $file" >&2; exit 1; }
+  done <<SUMS
+$BUN000_SHA bun000.ply
+ac61fef9a82c1a963fb33167209dbee5507cccddefed7b6c516c6c4cbd64eb2f bun045.ply
+1eaabf4c24aac4f02d42fcc64ba1dc0b817b0575aca6bf61aa50a96ac464facd bun090.ply
+e84e4a17666cc07ca2c353920b40336374763151c99a6dffb8e402c6190a5df1 bun180.ply
+a97009be31db07947c28658ba208207f1edde7556f3892536c54bb514420bf16 bun270.ply
+1a119403e3d2e654197c74419778e5599f96b4df309b2a0a6ed050104215a4db bun315.ply
+047401ae93d9b3c52c762364cc2ad1938ff40ffcc133a8acb54c81bd7a38c6c7 chin.ply
+e8b78473ec43b6cefe210fb4638c3666b2cf74d81ae552d832a6a600af63ca24 ear_back.ply
+622c9e33f5e046aced4a3f7f66a0b04804ff6aa6e1113faabe24726dd05bb6e5 top2.ply
+ccded0886e91bd3d2653f671c3bd45fad0228d2be54b9aa98f0ee6de60cbcbb2 top3.ply
+4e205d6675e6284e5b185ed87cb8390884e103fd1bb9f9b54e340be7708aebeb bun.conf
+SUMS
   stanford=$cache/stanford
 else
   echo "no Stanford bunny range data at BUNNY_GIT=$BUNNY_GIT: bun000 inputs skipped" >&2

@@ -12,6 +12,7 @@ use crate::spatial::{IndexKind, SpatialError, build_index};
 use rayon::prelude::*;
 
 pub mod outliers;
+pub mod strays;
 
 /// Cleaning parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -45,6 +46,9 @@ pub struct CleanStats {
     pub invalid_normals: usize,
     /// Points removed by the statistical outlier filter.
     pub outliers_removed: usize,
+    /// Points of a noisy cloud removed as strays off the surface ([`strays`]).
+    #[serde(default)]
+    pub strays_removed: usize,
 }
 
 /// Why a cloud cannot be reconstructed.
@@ -185,6 +189,7 @@ pub fn clean_cloud(
             0
         },
         outliers_removed: 0,
+        strays_removed: 0,
     };
     check_degenerate(&points, normals.is_some())?;
     // Colours and intensity follow the kept points (a merged duplicate keeps the first's).

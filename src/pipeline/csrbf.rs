@@ -26,9 +26,35 @@ pub fn fit_field(
     progress: &dyn Progress,
     timings: &mut Timings,
 ) -> Result<FittedField, ReconError> {
-    let (mut clean, clean_stats, normalization, points) =
+    let (mut clean, mut clean_stats, normalization, mut points) =
         clean_and_normalize(cloud, params, progress, timings)?;
-    let point_colors = super::point_colors(&clean, params);
+    let mut point_colors = super::point_colors(&clean, params);
+
+    progress.stage(crate::progress::Stage::Index);
+    let t = Instant::now();
+    let mut index: Arc<dyn SpatialIndex + Send> =
+        Arc::from(build_index(&points, params.index, params.leaf_size)?);
+    crate::clean::check_local_shape(&points, |p, k, out| index.nearest_k(p, k, out))?;
+    let support = estimate_support(&points, index.as_ref(), params.support)?;
+    let noise = crate::rbf::estimate_noise(&points, support.spacing, |p, k, out| {
+        index.nearest_k(p, k, out)
+    });
+    if noise.noisy {
+        let stray = crate::clean::strays::strays(&points, noise.sigma, |p, k, out| {
+            index.nearest_k(p, k, out)
+        });
+        let keep: Vec<usize> = (0..points.len()).filter(|&i| !stray[i]).collect();
+        if keep.len() < points.len() {
+            clean_stats.strays_removed = points.len() - keep.len();
+            clean_stats.used = keep.len();
+            clean = clean.select(&keep);
+            points = keep.iter().map(|&i| points[i]).collect();
+            point_colors = point_colors.map(|c| keep.iter().map(|&i| c[i]).collect());
+            index = Arc::from(build_index(&points, params.index, params.leaf_size)?);
+        }
+    }
+    let mut index_s = t.elapsed().as_secs_f64();
+
     let t = Instant::now();
     let normals_estimated = estimate_missing_normals(&mut clean, &points, params, progress);
     timings.normals = if normals_estimated {
@@ -36,22 +62,14 @@ pub fn fit_field(
     } else {
         0.0
     };
-
-    progress.stage(crate::progress::Stage::Index);
     let t = Instant::now();
-    let index: Arc<dyn SpatialIndex + Send> =
-        Arc::from(build_index(&points, params.index, params.leaf_size)?);
-    crate::clean::check_local_shape(&points, |p, k, out| index.nearest_k(p, k, out))?;
     let normals_reoriented = reorient_inconsistent_normals(&mut clean, &points, index.as_ref());
-    let support = estimate_support(&points, index.as_ref(), params.support)?;
-    let noise = crate::rbf::estimate_noise(&points, support.spacing, |p, k, out| {
-        index.nearest_k(p, k, out)
-    });
     let resolved = params.resolved_for(&noise);
     let params = &resolved;
     let count = params.levels;
     let wave = block_wave(&support, points.len(), count, params)?;
-    timings.index = t.elapsed().as_secs_f64();
+    index_s += t.elapsed().as_secs_f64();
+    timings.index = index_s;
 
     progress.stage(crate::progress::Stage::Carrier);
     let t = Instant::now();
