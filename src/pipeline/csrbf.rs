@@ -40,17 +40,14 @@ pub fn fit_field(
         index.nearest_k(p, k, out)
     });
     if noise.noisy {
-        let stray = crate::clean::strays::strays(&points, noise.sigma, |p, k, out| {
-            index.nearest_k(p, k, out)
-        });
-        let keep: Vec<usize> = (0..points.len()).filter(|&i| !stray[i]).collect();
-        if keep.len() < points.len() {
-            clean_stats.strays_removed = points.len() - keep.len();
-            clean_stats.used = keep.len();
-            clean = clean.select(&keep);
-            points = keep.iter().map(|&i| points[i]).collect();
-            point_colors = point_colors.map(|c| keep.iter().map(|&i| c[i]).collect());
-            index = Arc::from(build_index(&points, params.index, params.leaf_size)?);
+        let mut cloud = Cleaned {
+            clean: &mut clean,
+            stats: &mut clean_stats,
+            points: &mut points,
+            colors: &mut point_colors,
+        };
+        if let Some(rebuilt) = drop_strays(&mut cloud, index.as_ref(), noise.sigma, params)? {
+            index = rebuilt;
         }
     }
     let mut index_s = t.elapsed().as_secs_f64();
@@ -156,6 +153,39 @@ pub fn fit_field(
         color_mode: point_colors.as_ref().map(|_| params.color),
         point_colors,
     })
+}
+
+/// The cleaned cloud in its three parallel forms (input units with attributes, normalised
+/// points, colour values), which a filter must keep in step.
+struct Cleaned<'a> {
+    clean: &'a mut PointCloud,
+    stats: &'a mut crate::clean::CleanStats,
+    points: &'a mut Vec<Point3>,
+    colors: &'a mut Option<Vec<[f32; 3]>>,
+}
+
+/// Drops the strays of a noisy cloud ([`crate::clean::strays`], noise level `sigma`) from every
+/// form of it and counts them in the report; returns the index of the points left, `None` when
+/// nothing was dropped (the old index still holds).
+fn drop_strays(
+    cloud: &mut Cleaned,
+    index: &dyn SpatialIndex,
+    sigma: f64,
+    params: &ReconParams,
+) -> Result<Option<Arc<dyn SpatialIndex + Send>>, ReconError> {
+    let points = &*cloud.points;
+    let stray = crate::clean::strays::strays(points, sigma, |p, k, out| index.nearest_k(p, k, out));
+    let keep: Vec<usize> = (0..points.len()).filter(|&i| !stray[i]).collect();
+    if keep.len() == points.len() {
+        return Ok(None);
+    }
+    cloud.stats.strays_removed = points.len() - keep.len();
+    cloud.stats.used = keep.len();
+    *cloud.clean = cloud.clean.select(&keep);
+    *cloud.points = keep.iter().map(|&i| points[i]).collect();
+    *cloud.colors = (cloud.colors.take()).map(|c| keep.iter().map(|&i| c[i]).collect());
+    let index = build_index(cloud.points, params.index, params.leaf_size)?;
+    Ok(Some(Arc::from(index)))
 }
 
 /// Share of opposed neighbour normals above which the input's normals count as inconsistent.
