@@ -45,19 +45,15 @@ pub fn remove_outliers(cloud: &PointCloud, params: &OutlierParams) -> (PointClou
         .collect();
     // Robust centre and spread (median, 1.4826 · MAD = σ for a normal distribution): gross outliers
     // would inflate a plain mean/std and hide each other.
-    let median = median_of(mean_dist.clone());
-    let mad = median_of(mean_dist.iter().map(|d| (d - median).abs()).collect());
+    let median = crate::geometry::median(&mut mean_dist.clone());
+    let mad = crate::geometry::median(
+        &mut (mean_dist.iter())
+            .map(|d| (d - median).abs())
+            .collect::<Vec<_>>(),
+    );
     let limit = median + params.std_ratio * 1.4826 * mad.max(1e-12 * median);
     let keep: Vec<usize> = (0..n).filter(|&i| mean_dist[i] <= limit).collect();
     (cloud.select(&keep), n - keep.len())
-}
-
-fn median_of(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 #[cfg(test)]

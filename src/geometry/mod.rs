@@ -146,3 +146,12 @@ pub fn normalized<const D: usize>(a: [f64; D]) -> Option<[f64; D]> {
     let n = norm(a);
     (n > 0.0 && n.is_finite()).then(|| scale(a, 1.0 / n))
 }
+
+/// The median of `v` (the upper middle for an even length; `v` is reordered); 0 when empty.
+pub(crate) fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}

@@ -149,10 +149,8 @@ pub fn local_shape(
                 },
             )
             .unzip();
-        let mid = thin.len() / 2;
-        let median = |v: &mut Vec<f64>| *v.select_nth_unstable_by(mid, f64::total_cmp).1;
-        shape.thickness = shape.thickness.min(median(&mut thin));
-        shape.breadth = median(&mut broad);
+        shape.thickness = shape.thickness.min(super::median(&mut thin));
+        shape.breadth = super::median(&mut broad);
         shape.scale = k;
     }
     shape

@@ -151,38 +151,50 @@ pub fn has_boundary_edge(triangles: &[[u32; 3]]) -> bool {
         .any(|e| e.forward + e.backward == 1)
 }
 
-/// Groups the half-edges of all triangles by undirected edge, sorted by `(lo, hi)`: a counting
-/// sort by the lower vertex, then each vertex's few half-edges sorted by the higher one (`O(F)`;
-/// a comparison sort of all half-edges was a tenth of the simplification's time).
-pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
+/// The half-edges of `triangles` bucketed by their lower vertex (a counting sort, `O(F)`): vertex
+/// `v`'s are `values[start[v]..start[v + 1]]`, each `pack(higher vertex, triangle, lower → higher
+/// is the triangle's direction)`, sorted within the bucket (a vertex has few).
+fn by_lower_vertex(
+    triangles: &[[u32; 3]],
+    pack: impl Fn(u32, usize, bool) -> u64,
+) -> (Vec<usize>, Vec<u64>) {
     let n = (triangles.iter().flatten()).fold(0, |m, &v| m.max(v as usize + 1));
-    let halves = || {
-        triangles.iter().flat_map(|t| {
-            (0..3).map(move |k| {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                (a.min(b), a.max(b), a <= b)
-            })
-        })
-    };
     let mut start = vec![0usize; n + 1];
-    for (lo, _, _) in halves() {
-        start[lo as usize + 1] += 1;
+    for t in triangles {
+        for k in 0..3 {
+            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
+        }
     }
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    // The higher vertex and the direction of each half-edge, packed `hi << 1 | forward`.
-    let mut upper = vec![0u64; start[n]];
+    let mut values = vec![0u64; start[n]];
     let mut fill = start.clone();
-    for (lo, hi, forward) in halves() {
-        upper[fill[lo as usize]] = ((hi as u64) << 1) | forward as u64;
-        fill[lo as usize] += 1;
+    for (ti, t) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let lo = a.min(b) as usize;
+            values[fill[lo]] = pack(a.max(b), ti, a <= b);
+            fill[lo] += 1;
+        }
     }
+    for v in 0..n {
+        values[start[v]..start[v + 1]].sort_unstable();
+    }
+    (start, values)
+}
+
+/// Groups the half-edges of all triangles by undirected edge, sorted by `(lo, hi)`
+/// ([`by_lower_vertex`]; a comparison sort of all half-edges was a tenth of the simplification's
+/// time).
+pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
+    // The higher vertex and the direction of each half-edge, packed `hi << 1 | forward`.
+    let (start, upper) = by_lower_vertex(triangles, |hi, _, forward| {
+        (u64::from(hi) << 1) | forward as u64
+    });
     let mut edges: Vec<EdgeUse> = Vec::with_capacity(upper.len() / 2 + 1);
-    for lo in 0..n {
-        let bucket = &mut upper[start[lo]..start[lo + 1]];
-        bucket.sort_unstable();
-        for &x in bucket.iter() {
+    for lo in 0..start.len() - 1 {
+        for &x in &upper[start[lo]..start[lo + 1]] {
             let (hi, forward) = ((x >> 1) as u32, x & 1 == 1);
             match edges.last_mut() {
                 Some(e) if e.lo == lo as u32 && e.hi == hi => {
@@ -205,38 +217,17 @@ pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
 }
 
 /// Every half-edge as `(lo << 32 | hi, triangle)` (the undirected edge's key and the triangle
-/// using it), sorted: the order of a comparison sort of those pairs, by a counting sort on the
-/// lower vertex and a sort of each vertex's few half-edges (`O(F)`).
+/// using it), sorted: the order of a comparison sort of those pairs ([`by_lower_vertex`]).
 pub(crate) fn sorted_half_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
-    let n = (triangles.iter().flatten()).fold(0, |m, &v| m.max(v as usize + 1));
-    let mut start = vec![0usize; n + 1];
-    for t in triangles {
-        for k in 0..3 {
-            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
     // The higher vertex and the triangle of each half-edge, packed `hi << 32 | triangle`.
-    let mut upper = vec![0u64; start[n]];
-    let mut fill = start.clone();
-    for (ti, t) in triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let lo = a.min(b) as usize;
-            upper[fill[lo]] = (u64::from(a.max(b)) << 32) | ti as u64;
-            fill[lo] += 1;
-        }
-    }
+    let (start, upper) = by_lower_vertex(triangles, |hi, ti, _| (u64::from(hi) << 32) | ti as u64);
     let mut half = Vec::with_capacity(upper.len());
-    for lo in 0..n {
-        let bucket = &mut upper[start[lo]..start[lo + 1]];
-        bucket.sort_unstable();
-        half.extend(bucket.iter().map(|&x| {
-            let hi = x >> 32;
-            (((lo as u64) << 32) | hi, x as u32)
-        }));
+    for lo in 0..start.len() - 1 {
+        half.extend(
+            upper[start[lo]..start[lo + 1]]
+                .iter()
+                .map(|&x| (((lo as u64) << 32) | (x >> 32), x as u32)),
+        );
     }
     half
 }

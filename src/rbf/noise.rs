@@ -94,27 +94,18 @@ fn median_residual(
             quadric_residual(&nb)
         })
         .collect();
-    median_of(res.into_iter().flatten().collect())
+    crate::geometry::median(&mut res.into_iter().flatten().collect::<Vec<_>>())
 }
 
 /// Median of the quadric-fit residuals ([`quadric_residual`]) of `neighbourhoods` (each a point
 /// and its neighbours; degenerate ones are skipped); 0 when none fits. The noise level σ of a
 /// cloud when the neighbourhoods are about 12 points.
 pub(crate) fn median_quadric_residual(neighbourhoods: impl Iterator<Item = Vec<Point3>>) -> f64 {
-    median_of(
-        neighbourhoods
+    crate::geometry::median(
+        &mut neighbourhoods
             .filter_map(|nb| quadric_residual(&nb))
-            .collect(),
+            .collect::<Vec<_>>(),
     )
-}
-
-/// The median (upper middle) of `res`; 0 when empty.
-fn median_of(mut res: Vec<f64>) -> f64 {
-    if res.is_empty() {
-        return 0.0;
-    }
-    let mid = res.len() / 2;
-    *res.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Unbiased RMS residual of the least-squares height-field quadric through `nb` (≥ 8 points) in

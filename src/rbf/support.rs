@@ -67,7 +67,7 @@ pub fn estimate_support(
     let mut kth: Vec<f64> = kth.drain(..).flatten().collect();
     let radius = match support {
         Support::Radius(r) => r,
-        Support::Neighbours(_) => median(&mut kth) * 1.0001,
+        Support::Neighbours(_) => crate::geometry::median(&mut kth) * 1.0001,
     };
     if !(radius.is_finite() && radius > 0.0) {
         return Err(super::RbfError::BadSupport(radius));
@@ -84,14 +84,6 @@ pub fn estimate_support(
         radius,
         mean_neighbours,
         estimated_nnz: mean_neighbours * n as f64,
-        spacing: median(&mut spacing),
+        spacing: crate::geometry::median(&mut spacing),
     })
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
