@@ -16,7 +16,9 @@
 //!    subsample. Should the exact reach of a block (overlap, halo, tolerance) exceed the margin,
 //!    the partition is written again with a wider one.
 //! 4. **Blocks**: each spill file becomes the block's point set (duplicates merged by global id,
-//!    the same decision in every block), written to the store, and is removed.
+//!    the same decision in every block; on a cloud the noise estimate calls noisy, the strays of
+//!    [`crate::clean::strays`] dropped too, tested against the whole file), written to the store,
+//!    and is removed.
 //!
 //! Memory: the subsample and its tree, the spill buffers, one patch and one block per thread —
 //! nothing proportional to the cloud.
@@ -467,13 +469,15 @@ pub(crate) fn prepare(
         tol,
         normals: s.has_normals,
         flip: normals_flipped,
+        stray_sigma: noise.noisy.then_some(noise.sigma),
     };
-    let (blocks, merged) = write_blocks(&out, &part.alive, store, progress)?;
+    let (blocks, dropped) = write_blocks(&out, &part.alive, store, progress)?;
     let clean = CleanStats {
         points: s.total,
-        used: s.finite - merged,
+        used: s.finite - dropped.merged - dropped.strays,
         dropped_non_finite: s.total - s.finite,
-        merged_duplicates: merged,
+        merged_duplicates: dropped.merged,
+        strays_removed: dropped.strays,
         has_normals: s.has_normals,
         invalid_normals: s.invalid_normals,
         ..Default::default()
@@ -505,51 +509,62 @@ struct BlockOutput<'a> {
     tol: f64,
     normals: bool,
     flip: bool,
+    /// The noise level σ when the noise estimate calls the cloud noisy: its strays are dropped.
+    stray_sigma: Option<f64>,
 }
 
 /// Step 4: block `k` is the `k`-th of `alive`; its point set is every kept point within its
-/// outer box plus the halo. Returns the blocks and the duplicates merged in all.
+/// outer box plus the halo. Returns the blocks and what was dropped in all.
 fn write_blocks(
     out: &BlockOutput<'_>,
     alive: &[usize],
     store: &Store,
     progress: &dyn Progress,
-) -> Result<(Vec<BlockBox>, usize), ReconError> {
-    let results: Vec<Result<(BlockBox, usize), ReconError>> = (alive.par_iter().enumerate())
-        .map(|(b, &prov)| {
-            super::super::check_cancel(progress)?;
-            let path = route::spill_path(out.dir, prov);
-            let records = route::read_spill(&path, out.normals)?;
-            let core = out.cores[prov];
-            let outer = core.inflated(out.overlap);
-            let reach = outer.inflated(out.halo);
-            let owns = |p: &Point3| out.cores.iter().position(|c| c.contains(p)) == Some(prov);
-            let (set, merged) =
-                route::finish_block(&records, &reach, out.tol, out.normals, out.flip, owns)?;
-            drop(records);
-            let _ = std::fs::remove_file(&path);
-            let members = set.points.iter().filter(|p| outer.contains(p)).count();
-            store
-                .put(&block_key(b), set.encode())
-                .map_err(TiledError::from)?;
-            Ok((
-                BlockBox {
-                    core,
-                    outer,
-                    members,
-                },
-                merged,
-            ))
-        })
-        .collect();
+) -> Result<(Vec<BlockBox>, route::Dropped), ReconError> {
+    let results: Vec<Result<(BlockBox, route::Dropped), ReconError>> =
+        (alive.par_iter().enumerate())
+            .map(|(b, &prov)| {
+                super::super::check_cancel(progress)?;
+                let path = route::spill_path(out.dir, prov);
+                let records = route::read_spill(&path, out.normals)?;
+                let core = out.cores[prov];
+                let outer = core.inflated(out.overlap);
+                let reach = outer.inflated(out.halo);
+                let owns = |p: &Point3| out.cores.iter().position(|c| c.contains(p)) == Some(prov);
+                let (set, dropped) = route::finish_block(
+                    &records,
+                    &reach,
+                    out.tol,
+                    out.normals,
+                    out.flip,
+                    out.stray_sigma,
+                    owns,
+                )?;
+                drop(records);
+                let _ = std::fs::remove_file(&path);
+                let members = set.points.iter().filter(|p| outer.contains(p)).count();
+                store
+                    .put(&block_key(b), set.encode())
+                    .map_err(TiledError::from)?;
+                Ok((
+                    BlockBox {
+                        core,
+                        outer,
+                        members,
+                    },
+                    dropped,
+                ))
+            })
+            .collect();
     let mut blocks = Vec::with_capacity(results.len());
-    let mut merged = 0;
+    let mut dropped = route::Dropped::default();
     for r in results {
-        let (b, m) = r?;
+        let (b, d) = r?;
         blocks.push(b);
-        merged += m;
+        dropped.merged += d.merged;
+        dropped.strays += d.strays;
     }
-    Ok((blocks, merged))
+    Ok((blocks, dropped))
 }
 
 #[cfg(test)]

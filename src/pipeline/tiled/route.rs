@@ -240,33 +240,60 @@ pub(crate) fn keep_flags(records: &[Record], tol: f64) -> Result<Vec<bool>, Reco
         .collect())
 }
 
+/// What [`finish_block`] dropped that the block owns (its first containing core is the block's).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Dropped {
+    /// Duplicates merged into a point of lower id.
+    pub merged: usize,
+    /// Strays of a noisy cloud ([`crate::clean::strays`]).
+    pub strays: usize,
+}
+
 /// A block's stored point set from its spill records: the kept points within `reach`, in id
-/// order, normals negated when `flip`. Returns it with the count of dropped duplicates that
-/// `owns` (their first containing core is this block's).
+/// order, normals negated when `flip`. With `stray_sigma` (the noise level σ of a cloud the noise
+/// estimate calls noisy, normalised units) the strays are dropped too, tested against all the
+/// kept records of the file, so a point whose neighbours lie in the file (every point of the
+/// reach but where the data are sparser than the margin beyond it) gets the in-memory decision
+/// in every block that holds it. Returns it with what was dropped of what `owns`.
 pub(crate) fn finish_block(
     records: &[Record],
     reach: &Aabb,
     tol: f64,
     normals: bool,
     flip: bool,
+    stray_sigma: Option<f64>,
     owns: impl Fn(&Point3) -> bool,
-) -> Result<(PointSet, usize), ReconError> {
-    let near: Vec<Record> = (records.iter())
-        .filter(|r| reach.inflated(tol).contains(&r.p))
-        .copied()
-        .collect();
-    let keep = keep_flags(&near, tol)?;
+) -> Result<(PointSet, Dropped), ReconError> {
+    // Strays need every neighbour the file holds; duplicates only those within `tol` of the reach.
+    let near: Vec<Record> = match stray_sigma {
+        Some(_) => records.to_vec(),
+        None => (records.iter())
+            .filter(|r| reach.inflated(tol).contains(&r.p))
+            .copied()
+            .collect(),
+    };
+    let mut keep = keep_flags(&near, tol)?;
+    let strays = match stray_sigma {
+        Some(sigma) => stray_flags(&near, &keep, sigma)?,
+        None => vec![false; near.len()],
+    };
     let mut set = PointSet {
         normals: normals.then(Vec::new),
         ..Default::default()
     };
-    let mut merged = 0;
-    for (r, keep) in near.iter().zip(keep) {
+    let mut dropped = Dropped::default();
+    for (i, r) in near.iter().enumerate() {
         if !reach.contains(&r.p) {
             continue;
         }
-        if !keep {
-            merged += usize::from(owns(&r.p));
+        if !keep[i] || strays[i] {
+            let owned = usize::from(owns(&r.p));
+            if keep[i] {
+                dropped.strays += owned;
+            } else {
+                dropped.merged += owned;
+            }
+            keep[i] = false;
             continue;
         }
         set.ids.push(r.id);
@@ -275,5 +302,100 @@ pub(crate) fn finish_block(
             n.push(if flip { r.n.map(|v| -v) } else { r.n });
         }
     }
-    Ok((set, merged))
+    Ok((set, dropped))
+}
+
+/// Per record, whether it is a kept (`keep`) point farther than the stray limit from the plane of
+/// its kept neighbours (noise level `sigma`).
+fn stray_flags(records: &[Record], keep: &[bool], sigma: f64) -> Result<Vec<bool>, ReconError> {
+    let kept: Vec<usize> = (0..records.len()).filter(|&i| keep[i]).collect();
+    let pts: Vec<Point3> = kept.iter().map(|&i| records[i].p).collect();
+    let index = build_index(&pts, IndexKind::KdTree, 16)?;
+    let flags = crate::clean::strays::strays(&pts, sigma, |p, k, out| index.nearest_k(p, k, out));
+    let mut out = vec![false; records.len()];
+    for (&i, f) in kept.iter().zip(flags) {
+        out[i] = f;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::synthetic::{Defects, Shape, apply_defects};
+
+    #[test]
+    fn blocks_drop_the_strays_the_whole_cloud_drops() {
+        // A noisy sphere with a streak of strays, cut into two overlapping blocks whose spill
+        // files reach a margin beyond them: each block keeps exactly the whole cloud's survivors
+        // within its reach, and the owned counts add up to the whole cloud's.
+        let mut cloud = Shape::by_name("sphere").unwrap().sample(6000, 5);
+        let noise = Defects {
+            noise_rel: 0.002,
+            ..Default::default()
+        };
+        apply_defects(&mut cloud, &noise, 6).unwrap();
+        let normals = cloud.normals.clone().unwrap();
+        let sigma = 0.002 * Aabb::from_points(&cloud.points).diagonal();
+        for i in 0..30 {
+            let (p, n) = (cloud.points[i * 101], normals[i * 101]);
+            cloud
+                .points
+                .push([0, 1, 2].map(|k| p[k] + 12.0 * sigma * n[k]));
+        }
+        let records: Vec<Record> = (cloud.points.iter().enumerate())
+            .map(|(i, &p)| Record {
+                id: i as u32,
+                p,
+                n: [0.0; 3],
+            })
+            .collect();
+        let pts: Vec<Point3> = records.iter().map(|r| r.p).collect();
+        let index = build_index(&pts, IndexKind::KdTree, 16).unwrap();
+        let whole =
+            crate::clean::strays::strays(&pts, sigma, |p, k, out| index.nearest_k(p, k, out));
+        let whole_count = whole.iter().filter(|s| **s).count();
+        assert!(whole_count >= 25, "{whole_count} strays in the whole cloud");
+        let bbox = Aabb::from_points(&pts);
+        let mid = bbox.center()[0];
+        let cores = [
+            Aabb {
+                max: [mid, bbox.max[1], bbox.max[2]],
+                ..bbox
+            },
+            Aabb {
+                min: [mid, bbox.min[1], bbox.min[2]],
+                ..bbox
+            },
+        ];
+        let (reach, margin) = (0.05, 0.15);
+        let mut owned = 0;
+        for (b, core) in cores.iter().enumerate() {
+            let reach_box = core.inflated(reach);
+            let spill_box = core.inflated(margin);
+            let file: Vec<Record> = (records.iter())
+                .filter(|r| spill_box.contains(&r.p))
+                .copied()
+                .collect();
+            let owns = |p: &Point3| cores.iter().position(|c| c.contains(p)) == Some(b);
+            let (set, dropped) =
+                finish_block(&file, &reach_box, 1e-12, false, false, Some(sigma), owns).unwrap();
+            let expected: Vec<u32> = (records.iter())
+                .filter(|r| reach_box.contains(&r.p) && !whole[r.id as usize])
+                .map(|r| r.id)
+                .collect();
+            assert_eq!(set.ids, expected, "block {b}");
+            assert_eq!(dropped.merged, 0);
+            owned += dropped.strays;
+            // Without a noise level nothing but duplicates is dropped.
+            let (all, none) =
+                finish_block(&file, &reach_box, 1e-12, false, false, None, owns).unwrap();
+            assert_eq!(none, Dropped::default());
+            assert_eq!(
+                all.ids.len(),
+                file.iter().filter(|r| reach_box.contains(&r.p)).count()
+            );
+        }
+        assert_eq!(owned, whole_count);
+    }
 }
