@@ -63,6 +63,9 @@ pub fn remove_small_handles(mesh: &mut TriMesh, max_loop: f64) -> HandleStats {
     let Some(mut genus) = closed_genus(mesh) else {
         return stats;
     };
+    if genus == 0 {
+        return stats;
+    }
     let start = genus;
     let original = mesh.clone();
     let mut failed: HashSet<Vec<u32>> = HashSet::new();
