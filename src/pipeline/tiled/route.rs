@@ -272,7 +272,7 @@ pub(crate) fn finish_block(
             .copied()
             .collect(),
     };
-    let mut keep = keep_flags(&near, tol)?;
+    let keep = keep_flags(&near, tol)?;
     let strays = match stray_sigma {
         Some(sigma) => stray_flags(&near, &keep, sigma)?,
         None => vec![false; near.len()],
@@ -293,7 +293,6 @@ pub(crate) fn finish_block(
             } else {
                 dropped.merged += owned;
             }
-            keep[i] = false;
             continue;
         }
         set.ids.push(r.id);
