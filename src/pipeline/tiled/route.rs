@@ -265,16 +265,20 @@ pub(crate) fn finish_block(
     owns: impl Fn(&Point3) -> bool,
 ) -> Result<(PointSet, Dropped), ReconError> {
     // Strays need every neighbour the file holds; duplicates only those within `tol` of the reach.
-    let near: Vec<Record> = match stray_sigma {
-        Some(_) => records.to_vec(),
-        None => (records.iter())
-            .filter(|r| reach.inflated(tol).contains(&r.p))
-            .copied()
-            .collect(),
+    let within: Vec<Record>;
+    let near: &[Record] = match stray_sigma {
+        Some(_) => records,
+        None => {
+            within = (records.iter())
+                .filter(|r| reach.inflated(tol).contains(&r.p))
+                .copied()
+                .collect();
+            &within
+        }
     };
-    let keep = keep_flags(&near, tol)?;
+    let keep = keep_flags(near, tol)?;
     let strays = match stray_sigma {
-        Some(sigma) => stray_flags(&near, &keep, sigma)?,
+        Some(sigma) => stray_flags(near, &keep, sigma)?,
         None => vec![false; near.len()],
     };
     let mut set = PointSet {
