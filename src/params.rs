@@ -169,6 +169,12 @@ pub struct ReconParams {
     /// (default 2; 0 keeps every handle): thin bridges and pinholes where two parts come closer
     /// than the data separate them ([`crate::mesh::handles`]). Closed surfaces only.
     pub max_handle_loop: f64,
+    /// How far an open surface's border may reach beyond its data, in support radii (default
+    /// 0.5; 1 keeps the trim's border). The trim keeps every triangle within one support radius of
+    /// a point, which bridges gaps between returns but lets the border overhang the data; the
+    /// border is then peeled back to this distance wherever that keeps the pieces, holes and
+    /// handles ([`crate::mesh::peel`]). Open surfaces only.
+    pub border_reach: f64,
     /// Vertex colours from the points' attributes (default `rgb`: the points' RGB when the input
     /// has it, else none).
     pub color: crate::mesh::ColorMode,
@@ -253,6 +259,7 @@ impl Default for ReconParams {
             min_component: 0.0,
             min_support: 0.01,
             max_handle_loop: DEFAULT_MAX_HANDLE_LOOP,
+            border_reach: DEFAULT_BORDER_REACH,
             color: crate::mesh::ColorMode::Rgb,
             chord_error: ChordTolerance::default(),
         }
@@ -369,11 +376,17 @@ pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Som
 /// Default `max-handle-loop`, support radii: the spurious handles of 10k-point statue samples
 /// measured 0.1–2.0 R; the real ones measured 3.5 R and more (the elephant's).
 pub const DEFAULT_MAX_HANDLE_LOOP: f64 = 2.0;
+/// `border-reach`: [0.25, 1] support radii. Below a quarter radius the border would be peeled into
+/// the band between samples, where the surface is an interpolation anyway.
+pub const BORDER_REACH: Range = Range::num("border-reach", 0.25, false, Some(1.0));
+/// Default `border-reach`, support radii: on the outdoor scene b9 the mesh→scan mean distance of
+/// the surface within 0.25 R of a point is 4.7e-4 of the diagonal, between 0.25 R and R 2–5e-3.
+pub const DEFAULT_BORDER_REACH: f64 = 0.5;
 /// `lods`: 0..=8 levels of detail beside a GLB.
 pub const LODS: Range = Range::int("lods", 0, 8);
 
 /// Every numeric parameter's range.
-pub const RANGES: [Range; 13] = [
+pub const RANGES: [Range; 14] = [
     SUPPORT,
     NEIGHBOURS,
     RESOLUTION,
@@ -386,6 +399,7 @@ pub const RANGES: [Range; 13] = [
     MIN_COMPONENT,
     MIN_SUPPORT,
     MAX_HANDLE_LOOP,
+    BORDER_REACH,
     LODS,
 ];
 
@@ -525,6 +539,13 @@ impl ReconParams {
                 "a loop length in support radii in [0, 4] (0 keeps every handle)",
             );
         }
+        if !BORDER_REACH.contains(self.border_reach) {
+            return err(
+                "border-reach",
+                self.border_reach.to_string(),
+                "a distance in support radii in [0.25, 1] (1 keeps the trim's border)",
+            );
+        }
         if let ChordTolerance::Spacing(x) = self.chord_error
             && !(x.is_finite() && x > 0.0 && x <= 2.0)
         {
@@ -659,6 +680,10 @@ pub struct ReconOptions {
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default)]
     pub max_handle_loop: Option<f64>,
+    /// How far an open surface's border may reach beyond its data, in support radii (default 0.5; 1 keeps the trim's border at one support radius): the border is peeled back to it wherever that keeps the pieces, holes and handles. The report counts the peeled triangles (polygonize.peeled_triangles).
+    #[cfg_attr(feature = "cli", arg(long))]
+    #[serde(default)]
+    pub border_reach: Option<f64>,
     /// Vertex colours: rgb (default: the points' RGB, 8 or 16 bit, when the input has it — LAS/LAZ, E57 — else none), intensity (the points' intensity as grey), none. A smooth distance-weighted blend of the points within the support radius; written as COLOR_0 in GLB and red green blue in PLY.
     #[cfg_attr(feature = "cli", arg(long))]
     #[serde(default, with = "from_str_opt")]
@@ -759,6 +784,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             min_component: a.min_component.unwrap_or(d.min_component),
             min_support: a.min_support.unwrap_or(d.min_support),
             max_handle_loop: a.max_handle_loop.unwrap_or(d.max_handle_loop),
+            border_reach: a.border_reach.unwrap_or(d.border_reach),
             color: a.color.unwrap_or(d.color),
             chord_error: a.chord_error.unwrap_or(d.chord_error),
         };

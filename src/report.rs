@@ -283,6 +283,10 @@ pub struct PolygonizeReport {
     pub trimmed_triangles: usize,
     /// Triangles dropped to make the trimmed border manifold (bow-tie vertices).
     pub border_triangles: usize,
+    /// Triangles peeled off the trimmed border because they lie farther than `--border-reach`
+    /// support radii from every point, where that keeps the pieces, holes and handles (open
+    /// surfaces).
+    pub peeled_triangles: usize,
     /// Components dropped as floaters: carried by fewer than `--min-support` of the data points.
     pub floaters_removed: usize,
     /// Triangles in those components.

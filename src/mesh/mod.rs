@@ -5,8 +5,8 @@
 //! - [`optimize`]: vertex-cache and vertex-fetch reordering with meshoptimizer.
 //! - [`compare`]: Chamfer / Hausdorff distances to a reference mesh or point set.
 //! - [`lod`]: error-bounded simplified levels of detail (meshoptimizer).
-//! - [`trim`], [`border`], [`floaters`]: open-scan trimming, manifold borders, floater removal by
-//!   data support.
+//! - [`trim`], [`peel`], [`border`], [`floaters`]: open-scan trimming, peeling the border back to
+//!   the data without changing topology, manifold borders, floater removal by data support.
 
 pub mod border;
 pub mod color;
@@ -16,6 +16,7 @@ pub mod floaters;
 pub mod handles;
 pub mod lod;
 pub mod optimize;
+pub mod peel;
 pub mod simplify;
 #[cfg(test)]
 pub(crate) mod test_meshes;

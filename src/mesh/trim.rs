@@ -3,24 +3,15 @@
 //! on the data instead of a sheet continued by the carrier. `O(t log n)`, parallel.
 
 use crate::geometry::{Point3, TriMesh};
-use crate::spatial::KdTree;
-use rayon::prelude::*;
 
 /// Per triangle: `true` when its centroid is farther than `max_distance` from all `points` (same units
 /// as the mesh), i.e. no data supports it.
 pub fn unsupported_triangles(mesh: &TriMesh, points: &[Point3], max_distance: f64) -> Vec<bool> {
-    let tree = match KdTree::build(points) {
-        Ok(tree) if !points.is_empty() => tree,
-        _ => return vec![false; mesh.triangles.len()],
-    };
-    mesh.triangles
-        .par_iter()
-        .map(|t| {
-            let c = [0, 1, 2]
-                .map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
-            tree.nearest_one(&c).is_none_or(|(_, d)| d > max_distance)
-        })
-        .collect()
+    if points.is_empty() {
+        return vec![false; mesh.triangles.len()];
+    }
+    let dist = super::peel::centroid_distances(mesh, points);
+    dist.into_iter().map(|d| d > max_distance).collect()
 }
 
 /// Un-flags the pinholes of a trim: every edge-connected region of flagged triangles that shares an

@@ -29,7 +29,9 @@
 //! ([`trim::keep_enclosed_holes`]: a data gap wider than the band stays a hole, a gap barely wider
 //! than the trim radius no longer leaves a one-triangle hole), and bow-tie vertices are removed
 //! ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary loop per
-//! border or hole. Every surface then loses its floaters (components carried by fewer than
+//! border or hole. The border is then peeled back to `border_reach` support radii from the data
+//! wherever that keeps the pieces, holes and handles ([`crate::mesh::peel`]): the trim radius
+//! bridges the gaps between returns, the peel removes the overhang beyond the last ones. Every surface then loses its floaters (components carried by fewer than
 //! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
 //! pieces, and is simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology kept).
 //! A closed surface then loses its small handles ([`crate::mesh::handles`]): bridges and pinholes
@@ -137,6 +139,12 @@ pub(crate) fn extract_surface(
     let (drop, n) = trim::small_components(&mesh, params.min_component);
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
+    if open {
+        // After the floaters: they are judged on the trimmed surface, whose vertices the points count for.
+        let reach = params.border_reach * fit.support_radius;
+        s.peeled_triangles =
+            crate::mesh::peel::peel_border(&mut mesh, &fit.points, reach, fit.support_radius);
+    }
     let t = std::time::Instant::now();
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
     s.simplify_s = t.elapsed().as_secs_f64();

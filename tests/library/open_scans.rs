@@ -1,6 +1,6 @@
 //! Open scans and floaters end to end: a range image with holes gives one manifold sheet on the data
 //! with one boundary loop per border or hole, polygonized only in the data band; two separate objects
-//! stay two closed components.
+//! stay two closed components; the border is peeled back to the data without changing topology.
 
 use rbfsurf::geometry::PointCloud;
 use rbfsurf::geometry::synthetic::{Shape, SplitMix64};
@@ -174,4 +174,58 @@ fn a_closed_elk_sampled_all_around_without_normals_comes_out_closed() {
     assert_eq!(rec.report.params.boundary, "closed");
     assert!(m.watertight && m.manifold && m.oriented, "{m:?}");
     assert_eq!((m.components, m.boundary_loops), (1, 0), "{m:?}");
+}
+
+/// Mean distance from the border vertices (on an edge of one triangle) of `mesh` to the data.
+fn border_reach(mesh: &rbfsurf::geometry::TriMesh, tree: &KdTree) -> f64 {
+    let mut count = std::collections::HashMap::new();
+    for t in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    let mut border: Vec<u32> = (count.iter().filter(|(_, n)| **n == 1))
+        .flat_map(|((a, b), _)| [*a, *b])
+        .collect();
+    border.sort_unstable();
+    border.dedup();
+    let sum: f64 = (border.iter())
+        .map(|&v| tree.nearest_one(&mesh.vertices[v as usize]).unwrap().1)
+        .sum();
+    sum / border.len() as f64
+}
+
+/// The border of an open scan is peeled back towards the data (`--border-reach`, default half a
+/// support radius) and keeps the sheet's topology: the same pieces, holes and Euler characteristic
+/// as the trim alone (`border_reach` 1), with the border vertices nearer the data.
+#[test]
+fn the_border_of_a_range_image_is_peeled_back_to_its_data() {
+    let cloud = range_image_with_holes(100);
+    let tree = KdTree::build(&cloud.points).unwrap();
+    let run = |border_reach| {
+        let params = ReconParams {
+            border_reach,
+            ..Default::default()
+        };
+        reconstruct(&cloud, &params, &NoProgress).unwrap()
+    };
+    let (trim, peel) = (run(1.0), run(ReconParams::default().border_reach));
+    let (a, b) = (&trim.report.mesh, &peel.report.mesh);
+    assert_eq!(trim.report.polygonize.peeled_triangles, 0);
+    assert!(peel.report.polygonize.peeled_triangles > 0);
+    assert_eq!(
+        (a.components, a.boundary_loops, a.euler),
+        (b.components, b.boundary_loops, b.euler)
+    );
+    assert!(
+        b.manifold && (b.non_manifold_vertices, b.non_manifold_edges) == (0, 0),
+        "{b:?}"
+    );
+    let r = peel.report.params.support_input_units;
+    let (before, after) = (
+        border_reach(&trim.mesh, &tree),
+        border_reach(&peel.mesh, &tree),
+    );
+    assert!(after < 0.8 * before, "border {before} → {after} (R = {r})");
 }

@@ -33,7 +33,8 @@ function choose(file) {
 function queryString() {
   const q = new URLSearchParams();
   for (const k of ["resolution", "neighbours", "kernel", "carrier", "solver", "boundary",
-                   "min-component", "smoothing", "outlier-std-ratio", "color", "lods"]) {
+                   "min-component", "border-reach", "smoothing", "outlier-std-ratio", "color",
+                   "lods"]) {
     const v = $(k).value.trim();
     if (v) q.set(k, v);
   }
