@@ -209,18 +209,7 @@ mod tests {
 
     #[test]
     fn edges_with_three_triangles_keep_two() {
-        let mut mesh = TriMesh {
-            vertices: vec![
-                [0.0, 0.0, 0.0],
-                [1.0, 0.0, 0.0],
-                [0.5, 1.0, 0.0],
-                [0.5, -1.0, 0.0],
-                [0.5, 0.0, 1.0],
-            ],
-            normals: vec![],
-            triangles: vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
-            colors: Vec::new(),
-        };
+        let mut mesh = crate::mesh::test_meshes::fin();
         assert_eq!(analyze(&mesh).non_manifold_edges, 1);
         assert_eq!(make_manifold(&mut mesh), 1);
         let t = analyze(&mesh);

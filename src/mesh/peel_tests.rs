@@ -201,18 +201,7 @@ fn a_closed_mesh_and_a_fin_are_left_alone() {
     let far = [[10.0, 10.0, 10.0]];
     assert_eq!(peel_border(&mut torus, &far, 0.1, 2.0 * 0.1), 0);
     // Three triangles on one edge (non-manifold): none is peeled, nothing panics.
-    let mut fin = TriMesh {
-        vertices: vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.5, 1.0, 0.0],
-            [0.5, -1.0, 0.0],
-            [0.5, 0.0, 1.0],
-        ],
-        normals: vec![],
-        triangles: vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
-        colors: Vec::new(),
-    };
+    let mut fin = crate::mesh::test_meshes::fin();
     assert_eq!(peel_border(&mut fin, &far, 0.1, 2.0 * 0.1), 0);
     // No points at all: every triangle is infinitely far, and a single sheet collapses only to
     // what cannot be collapsed further: one triangle is left (a piece never disappears).

@@ -17,6 +17,22 @@ pub(crate) fn tetrahedron() -> TriMesh {
     }
 }
 
+/// Three triangles on the edge `(0, 1)` (a non-manifold edge): a fin.
+pub(crate) fn fin() -> TriMesh {
+    TriMesh {
+        vertices: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.5, 1.0, 0.0],
+            [0.5, -1.0, 0.0],
+            [0.5, 0.0, 1.0],
+        ],
+        normals: vec![],
+        triangles: vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
+        colors: Vec::new(),
+    }
+}
+
 /// Axis-aligned cube with lower corner `min` and edge `size`: 8 vertices (index `x + 2y + 4z`),
 /// 12 triangles wound outward.
 pub(crate) fn cube(min: [f64; 3], size: f64) -> TriMesh {
