@@ -176,3 +176,33 @@ fn a_plate_thinner_than_the_neighbourhood_gets_each_face_its_own_plane() {
         "{moved} lines moved, {far} by > 10°"
     );
 }
+
+/// A noisy, nearly flat open sheet (a terrain tile or a wall: 120k points, σ = 0.3 spacing)
+/// encloses nothing: its winding numbers are noise around 0, which must not flip patches of it
+/// inward (it did: thousands of points in small patches at 10⁶ points, each a pinhole in the
+/// surface). Its estimated normals all agree with one of the two sides.
+#[test]
+fn a_noisy_flat_sheet_is_oriented_one_way() {
+    let n = 120_000;
+    let mut rng = crate::geometry::synthetic::SplitMix64(5);
+    let spacing = (12.0 / n as f64).sqrt();
+    let (mut points, mut truth) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for _ in 0..n {
+        let (x, y) = (4.0 * rng.next_f64(), 3.0 * rng.next_f64());
+        let z = 0.15 * (2.0 * x).sin() * (3.0 * y).cos() + 0.3 * spacing * rng.next_gaussian();
+        let (dx, dy) = (
+            0.3 * (2.0 * x).cos() * (3.0 * y).cos(),
+            -0.45 * (2.0 * x).sin() * (3.0 * y).sin(),
+        );
+        let l = (dx * dx + dy * dy + 1.0).sqrt();
+        points.push([x, y, z]);
+        truth.push([-dx / l, -dy / l, 1.0 / l]);
+    }
+    let est = estimate_oriented_normals(&points, &NormalParams::default());
+    let (flips, _) = wrong(&est, &truth);
+    let minority = flips.min(n - flips);
+    assert!(
+        minority <= n / 2000,
+        "{minority} of {n} normals against the rest"
+    );
+}
