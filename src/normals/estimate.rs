@@ -1,5 +1,6 @@
 //! PCA normals: the eigenvector of the smallest eigenvalue of the covariance of each point's k
-//! nearest neighbours (itself included), fitted to the point's own sheet where the neighbourhood
+//! nearest neighbours (itself included; more where those lie along a line, as on scan lines:
+//! [`collinear`]), fitted to the point's own sheet where the neighbourhood
 //! reaches across a thin part ([`sheet_normal`]). Also returns the k-NN lists that the orientation
 //! graph is built from. Neighbours come from [`crate::spatial::KdTree`]. `O(n k log n)`, parallel.
 
@@ -29,6 +30,15 @@ pub fn estimate_normals(points: &[Point3], k: usize) -> (Vec<Point3>, Vec<Vec<u3
                 tree.nearest_k(p, want, nn);
                 local.clear();
                 local.extend(nn.iter().map(|&(j, _)| points[j as usize]));
+                // Scan lines: the k nearest may all lie on the point's own line, whose plane is
+                // any plane through it. Widen until the neighbourhood spans a surface.
+                let mut m = want;
+                while m < WIDEST * want && m < points.len() && collinear(local) {
+                    m = (2 * m).min(WIDEST * want).min(points.len());
+                    tree.nearest_k(p, m, nn);
+                    local.clear();
+                    local.extend(nn.iter().map(|&(j, _)| points[j as usize]));
+                }
                 let n = sheet_normal(local, *p);
                 let nbrs = nn
                     .iter()
@@ -39,6 +49,20 @@ pub fn estimate_normals(points: &[Point3], k: usize) -> (Vec<Point3>, Vec<Vec<u3
             },
         )
         .unzip()
+}
+
+/// A neighbourhood whose second variance is below this share of its first lies along a line (the
+/// points of one scan line of a LiDAR or a profile scanner): width / length below about 0.22.
+/// Measured share of points below it with 12 neighbours: 79 % of a scan-line height field (lines
+/// 7.5 spacings apart), none on the closed statues, 0.02 % on b9, 0.9 % on radar.
+const LINE_SHARE: f64 = 0.05;
+/// Widest neighbourhood tried on a line, as a multiple of the requested one.
+const WIDEST: usize = 8;
+
+/// Whether the points of `local` lie along a line ([`LINE_SHARE`]).
+fn collinear(local: &[Point3]) -> bool {
+    let v = pca(local).variances;
+    v[1] < LINE_SHARE * v[0]
 }
 
 /// Refits of the plane to the point's own sheet.

@@ -206,3 +206,32 @@ fn a_noisy_flat_sheet_is_oriented_one_way() {
         "{minority} of {n} normals against the rest"
     );
 }
+
+/// A height field sampled on scan lines (a LiDAR's or a profile scanner's: lines 0.03 apart, a
+/// point every 0.004 along them, noise 0.001 across), `x y z` only: the 12 nearest points of a point lie on its own
+/// line, whose plane is undetermined; the neighbourhood is widened until it spans the surface.
+/// Before: 12.7 % of the normals more than 18° off.
+#[test]
+fn normals_on_scan_lines_span_the_surface() {
+    let mut rng = crate::geometry::synthetic::SplitMix64(7);
+    let (mut points, mut truth) = (Vec::new(), Vec::new());
+    for i in 0..40 {
+        for j in 0..500 {
+            let x = 0.03 * i as f64 + 0.002 * rng.next_gaussian();
+            let y = 0.004 * j as f64;
+            let z = 0.15 * (2.0 * x).sin() * (3.0 * y).cos() + 0.001 * rng.next_gaussian();
+            let (dx, dy) = (
+                0.3 * (2.0 * x).cos() * (3.0 * y).cos(),
+                -0.45 * (2.0 * x).sin() * (3.0 * y).sin(),
+            );
+            let l = (dx * dx + dy * dy + 1.0).sqrt();
+            points.push([x, y, z]);
+            truth.push([-dx / l, -dy / l, 1.0 / l]);
+        }
+    }
+    let n = points.len();
+    let est = estimate_oriented_normals(&points, &NormalParams::default());
+    let (flips, off) = wrong(&est, &truth);
+    assert!(flips.min(n - flips) <= n / 1000, "{flips} of {n} flipped");
+    assert!(off <= n / 100, "{off} of {n} normals more than 18° off");
+}
