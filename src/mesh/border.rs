@@ -155,26 +155,7 @@ mod tests {
 
     /// A flat `n × n` grid of unit squares, two triangles each, counter-clockwise from +z.
     fn grid(n: u32) -> TriMesh {
-        let mut vertices = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                vertices.push([i as f64, j as f64, 0.0]);
-            }
-        }
-        let id = |i: u32, j: u32| j * (n + 1) + i;
-        let mut triangles = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        TriMesh {
-            vertices,
-            normals: vec![],
-            triangles,
-            colors: Vec::new(),
-        }
+        crate::mesh::test_meshes::sheet(n, n, |_, _| true)
     }
 
     #[test]

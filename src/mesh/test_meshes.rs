@@ -17,6 +17,34 @@ pub(crate) fn tetrahedron() -> TriMesh {
     }
 }
 
+/// A sheet of unit squares in z = 0, two triangles each, over the cells `(i, j)` of an
+/// `nx × ny` grid for which `keep` holds.
+pub(crate) fn sheet(nx: u32, ny: u32, keep: impl Fn(u32, u32) -> bool) -> TriMesh {
+    let mut vertices = Vec::new();
+    for j in 0..=ny {
+        for i in 0..=nx {
+            vertices.push([i as f64, j as f64, 0.0]);
+        }
+    }
+    let at = |i: u32, j: u32| j * (nx + 1) + i;
+    let mut triangles = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            if keep(i, j) {
+                let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            }
+        }
+    }
+    TriMesh {
+        vertices,
+        normals: vec![],
+        triangles,
+        colors: Vec::new(),
+    }
+}
+
 /// Three triangles on the edge `(0, 1)` (a non-manifold edge): a fin.
 pub(crate) fn fin() -> TriMesh {
     TriMesh {
