@@ -42,10 +42,14 @@ const OPPOSITE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// Distance from each triangle's centroid to the nearest of `points` (the mesh's units);
 /// infinite for every triangle when there are no points.
 pub fn centroid_distances(mesh: &TriMesh, points: &[Point3]) -> Vec<f64> {
-    let tree = match KdTree::build(points) {
-        Ok(tree) if !points.is_empty() => tree,
-        _ => return vec![f64::INFINITY; mesh.triangles.len()],
-    };
+    match KdTree::build(points) {
+        Ok(tree) => distances_to(mesh, &tree),
+        Err(_) => vec![f64::INFINITY; mesh.triangles.len()],
+    }
+}
+
+/// [`centroid_distances`] to the points indexed by `tree` (infinite when it is empty).
+fn distances_to(mesh: &TriMesh, tree: &KdTree) -> Vec<f64> {
     mesh.triangles
         .par_iter()
         .map(|t| {
@@ -58,15 +62,16 @@ pub fn centroid_distances(mesh: &TriMesh, points: &[Point3]) -> Vec<f64> {
 
 /// Peels `mesh`'s border: removes, farthest first, the triangles whose centroid is farther than
 /// `max_distance` from every one of `points` and not between them ([`between_data`] within
-/// `radius`, the support radius), and whose removal is an elementary collapse (see the module doc), until none
-/// is left. Distances in the mesh's units. Keeps the pieces, boundary loops, Euler characteristic
-/// and manifoldness. A closed mesh has no border and is returned unchanged. Returns how many
-/// triangles were removed. `O(t log t)` plus a radius query per triangle beyond `max_distance`.
+/// `radius`, the support radius), and whose removal is an elementary collapse (see the module
+/// doc), until none is left. Distances in the mesh's units. Keeps the pieces, boundary loops,
+/// Euler characteristic and manifoldness. A closed mesh has no border and is returned unchanged.
+/// Returns how many triangles were removed. `O(t log t)` plus a radius query per triangle beyond
+/// `max_distance`.
 pub fn peel_border(mesh: &mut TriMesh, points: &[Point3], max_distance: f64, radius: f64) -> usize {
     let Ok(tree) = KdTree::build(points) else {
         return 0;
     };
-    let dist = centroid_distances(mesh, points);
+    let dist = distances_to(mesh, &tree);
     let overhang: Vec<bool> = (mesh.triangles.par_iter().zip(&dist))
         .map_init(Vec::new, |near, (t, &d)| {
             d > max_distance && !between_data(mesh, t, (&tree, points), radius, near)
