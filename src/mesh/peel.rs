@@ -43,20 +43,23 @@ const OPPOSITE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// infinite for every triangle when there are no points.
 pub fn centroid_distances(mesh: &TriMesh, points: &[Point3]) -> Vec<f64> {
     match KdTree::build(points) {
-        Ok(tree) => distances_to(mesh, &tree),
+        Ok(tree) => (nearest_to(mesh, &tree).into_iter())
+            .map(|hit| hit.map_or(f64::INFINITY, |(_, d)| d))
+            .collect(),
         Err(_) => vec![f64::INFINITY; mesh.triangles.len()],
     }
 }
 
-/// [`centroid_distances`] to the points indexed by `tree` (infinite when it is empty).
-fn distances_to(mesh: &TriMesh, tree: &KdTree) -> Vec<f64> {
-    mesh.triangles
-        .par_iter()
-        .map(|t| {
-            let c = [0, 1, 2]
-                .map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
-            tree.nearest_one(&c).map_or(f64::INFINITY, |(_, d)| d)
-        })
+/// The centroid of triangle `t`.
+fn centroid(mesh: &TriMesh, t: &[u32; 3]) -> Point3 {
+    [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0)
+}
+
+/// Per triangle, the point of `tree` nearest its centroid and the distance (`None` when the tree
+/// is empty).
+fn nearest_to(mesh: &TriMesh, tree: &KdTree) -> Vec<Option<(u32, f64)>> {
+    (mesh.triangles.par_iter())
+        .map(|t| tree.nearest_one(&centroid(mesh, t)))
         .collect()
 }
 
@@ -71,35 +74,38 @@ pub fn peel_border(mesh: &mut TriMesh, points: &[Point3], max_distance: f64, rad
     let Ok(tree) = KdTree::build(points) else {
         return 0;
     };
-    let dist = distances_to(mesh, &tree);
-    let overhang: Vec<bool> = (mesh.triangles.par_iter().zip(&dist))
-        .map_init(Vec::new, |near, (t, &d)| {
-            d > max_distance && !between_data(mesh, t, (&tree, points), radius, near)
+    let nearest = nearest_to(mesh, &tree);
+    let dist: Vec<f64> = (nearest.iter())
+        .map(|hit| hit.map_or(f64::INFINITY, |(_, d)| d))
+        .collect();
+    let overhang: Vec<bool> = (mesh.triangles.par_iter().zip(&nearest))
+        .map_init(Vec::new, |near, (t, hit)| match *hit {
+            None => true,
+            Some((i, d)) => {
+                let c = centroid(mesh, t);
+                d > max_distance
+                    && !between_data(c, (points[i as usize], d), (&tree, points), radius, near)
+            }
         })
         .collect();
     let drop = peel_flags(&mesh.triangles, mesh.vertices.len(), &dist, &overhang);
     super::trim::remove_triangles(mesh, &drop)
 }
 
-/// Whether triangle `t`'s centroid lies between data: some point within `radius` of it (the
-/// `points`, indexed by `tree`) lies in the cone of half-angle 45° ([`OPPOSITE_COS`]) around the
-/// direction away from its nearest point. False beside a border of the data (an overhang) or with
-/// no point within `radius`. `near` is scratch space.
+/// Whether the centroid `c` lies between data: some point within `radius` of it (the `points`,
+/// indexed by `tree`) lies in the cone of half-angle 45° ([`OPPOSITE_COS`]) around the direction
+/// away from its nearest point `p`, at distance `d`. False beside a border of the data (an
+/// overhang) or with no point within `radius`. `near` is scratch space.
 fn between_data(
-    mesh: &TriMesh,
-    t: &[u32; 3],
+    c: Point3,
+    (p, d): (Point3, f64),
     (tree, points): (&KdTree, &[Point3]),
     radius: f64,
     near: &mut Vec<u32>,
 ) -> bool {
-    let c = [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
-    let Some((i, d)) = tree.nearest_one(&c) else {
-        return false;
-    };
     if d <= 0.0 {
         return true;
     }
-    let p = points[i as usize];
     let u = [0, 1, 2].map(|k| (p[k] - c[k]) / d);
     near.clear();
     tree.within(&c, radius, near);

@@ -29,11 +29,13 @@
 //! ([`trim::keep_enclosed_holes`]: a data gap wider than the band stays a hole, a gap barely wider
 //! than the trim radius no longer leaves a one-triangle hole), and bow-tie vertices are removed
 //! ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary loop per
-//! border or hole. The border is then peeled back to `border_reach` support radii from the data
-//! wherever that keeps the pieces, holes and handles ([`crate::mesh::peel`]): the trim radius
-//! bridges the gaps between returns, the peel removes the overhang beyond the last ones. Every surface then loses its floaters (components carried by fewer than
+//! border or hole. Every surface then loses its floaters (components carried by fewer than
 //! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
-//! pieces, and is simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology kept).
+//! pieces; an open one then has its border peeled back to `border_reach` support radii from the
+//! data wherever that keeps the pieces, holes and handles ([`crate::mesh::peel`]: the trim radius
+//! bridges the gaps between returns, the peel removes the overhang beyond the last ones); every
+//! surface is then simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology
+//! kept).
 //! A closed surface then loses its small handles ([`crate::mesh::handles`]): bridges and pinholes
 //! whose shortest loop around is at most `max_handle_loop` support radii, where two parts came
 //! closer than the data separate them.
@@ -140,7 +142,8 @@ pub(crate) fn extract_surface(
     s.small_components_removed = n;
     s.small_component_triangles = trim::remove_triangles(&mut mesh, &drop);
     if open {
-        // After the floaters: they are judged on the trimmed surface, whose vertices the points count for.
+        // After the floaters: they are judged on the trimmed surface, whose vertices the points
+        // count for.
         let reach = params.border_reach * fit.support_radius;
         s.peeled_triangles =
             crate::mesh::peel::peel_border(&mut mesh, &fit.points, reach, fit.support_radius);
