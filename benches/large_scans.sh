@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Large-scan benchmark (issue #6): rbfsurf vs screened Poisson (Open3D) on synthetic scans with a
+# Large-scan benchmark: rbfsurf vs screened Poisson (Open3D) on synthetic scans with a
 # known truth mesh and on the real data sets, with wall time, peak RSS, accuracy and topology.
 #
 # Usage (from the repository root):  benches/large_scans.sh [--quick] [--no-poisson] [--scratch DIR]

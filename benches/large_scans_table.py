@@ -3,13 +3,13 @@
 Usage: large_scans_table.py RESULTS.tsv OUT.md QUICK(0/1) POISSON(0/1). Rows: input, N, tool, wall s,
 core s, peak RSS MiB, chamfer_rel, hausdorff_rel, components, genus, watertight ('-' = unknown).
 """
-import sys, datetime, platform, os
+import sys, platform, os
 rows = [l.rstrip('\n').split('\t') for l in open(sys.argv[1]) if l.strip()]
 quick, poisson = sys.argv[3] == '1', sys.argv[4] == '1'
 out = []
 cmd = 'benches/large_scans.sh' + (' --quick' if quick else '') + ('' if poisson else ' --no-poisson')
 out.append(f'# Large-scan benchmark\n')
-out.append(f'`{cmd}` on {datetime.date.today()}, {os.cpu_count()} cores, {platform.machine()} Linux. '
+out.append(f'`{cmd}` on {os.cpu_count()} cores, {platform.machine()} Linux. '
            'time = wall seconds of the whole process (start-up, read, write included; GNU time), '
            'core = in-process reconstruction seconds (rbfsurf: report total − read − write; Poisson: '
            'normal estimation + Poisson), RSS = peak resident set. Accuracy: `rbfsurf compare OUT '

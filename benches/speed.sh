@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Whole-process wall time side by side (issue 14): rbfsurf with default parameters against native
+# Whole-process wall time side by side: rbfsurf with default parameters against native
 # screened Poisson (PoissonRecon --depth 10, its default parallelism), runs interleaved so both see
 # the same machine load; prints a Markdown table of the ranges and the ratio of the medians.
 #

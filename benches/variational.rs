@@ -1,4 +1,4 @@
-//! Variational implicits benchmarks (issue 5): Turk–O'Brien on Koch K4 (Mann: 143 s in Octave),
+//! Variational implicits benchmarks: Turk–O'Brien on Koch K4 (Mann: 143 s in Octave),
 //! Shen's four MLS variants on the square at 101×101 (Mann Table 1: 8/11/29/38 s), and incremental
 //! constraint addition vs a fresh solve at N = 2000.
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # 3D comparison of the dense variational method (Turk–O'Brien r³) with Shen MLS and the CSRBF
-# default (issue 5, benchmark item 4), and a size sweep on random subsets of the bunny.
+# default, and a size sweep on random subsets of the bunny.
 #
 # For each run: wall time of the fit + polygonization (from the --report JSON: total of the stage
 # timings), peak resident memory (/usr/bin/time -v), output size, and accuracy of the mesh against

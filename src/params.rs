@@ -194,10 +194,10 @@ pub enum ChordTolerance {
     Spacing(f64),
 }
 
-/// The default chord error in point spacings. Measured (issue 14): armadillo 10k 178k → 63k
+/// The default chord error in point spacings. Measured at 0.05: armadillo 10k 178k → 63k
 /// triangles, Chamfer to the truth 4.89e-4 → 4.94e-4; camel 10k 182k → 39k, 2.86e-4 → 2.93e-4;
-/// at 0.1 the counts halve again but the Chamfer grows by 3–12%. 0.03 since measured on clean dense
-/// data (twenty-third session): at 0.05 the clean bunny (37,706 points) lost a third of its accuracy
+/// at 0.1 the counts halve again but the Chamfer grows by 3–12%. 0.03 measured on clean dense
+/// data: at 0.05 the clean bunny (37,706 points) lost a third of its accuracy
 /// (Chamfer to `bunny00.off` 4.5e-5 unsimplified → 6.0e-5), at 0.03 4.7e-5 with 63k triangles
 /// instead of 41k.
 pub const DEFAULT_CHORD_SPACING: f64 = 0.03;

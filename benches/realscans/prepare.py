@@ -334,13 +334,13 @@ def main():
     statue('camel', 0, [('10k-n', 10000, 1, 0, True), ('10k-xyz', 10000, 1, 0, False)], embedded=False)
     statue('man', 0, [('26k-xyz', 26000, 1, 0, False)], embedded=False)
     statue('elephant', 3, [('10k-xyz', 10000, 1, 0, False)])
-    # Added in the fifteenth session, untuned: first run with the defaults as they stood (their
-    # solids' genus checked with truth_topology.py: it converges to the listed one).
+    # Statues not used to tune the defaults (their solids' genus checked with truth_topology.py:
+    # it converges to the listed one).
     for mesh, genus in [('bear', 0), ('bull', 0), ('fandisk', 0), ('homer', 0), ('diplodocus', 0),
                         ('ChineseDragon-10kv', 0), ('knot', 1), ('eight', 2), ('elk', 1)]:
         statue(mesh, genus, [('10k-xyz', 10000, 1, 0, False)])
-    # Added in the eighteenth session: the elk's other samples whose thin plates flipped regions of
-    # the estimated normals (docs/robustness.md, "Inward regions inside a patch").
+    # The elk's other samples whose thin plates flip regions of the estimated normals when the
+    # orientation does not vote per region (docs/robustness.md).
     statue('elk', 1, [('10k-s%d-xyz' % seed, 10000, seed, 0, False) for seed in (4, 5, 6)])
 
     # --- the shared CGAL scans ---

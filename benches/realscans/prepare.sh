@@ -88,7 +88,7 @@ if [[ -x $BIN ]]; then
   "$BIN" generate torus --points 1000000 --seed 1 --noise 0.0005 \
     -o "$OUT/torus-1M-noise0.05.ply" --truth "$OUT/truth/torus.ply" > /dev/null
   printf 'torus-1M-noise0.05\t%s\t%s\t%s\tyes\t%s\n' "$OUT/torus-1M-noise0.05.ply" "$OUT/truth/torus.ply" \
-    'closed: 1 watertight component, genus 1; mesh->truth Chamfer <= 1.5e-4 (issue 12)' \
+    'closed: 1 watertight component, genus 1; mesh->truth Chamfer <= 1.5e-4' \
     '`rbfsurf generate torus --points 1000000 --seed 1 --noise 0.0005` (with normals)' >> "$OUT/manifest.tsv"
   "$BIN" generate two-spheres --points 20000 --seed 1 --no-normals -o "$OUT/two-spheres-xyz.ply" \
     --truth "$OUT/truth/two-spheres.ply" > /dev/null

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Real-scan benchmark (issue 12): rbfsurf with DEFAULT parameters vs native screened Poisson on the
+# Real-scan benchmark: rbfsurf with DEFAULT parameters vs native screened Poisson on the
 # inputs that benches/realscans/prepare.sh makes (statues with thin parts with and without normals,
 # noisy and sparse variants, the six shared CGAL scans, a building, a single-view range scan, the
 # noisy 10^6 torus). Records topology, mesh->scan distance, Chamfer against the truth where there is

@@ -12,7 +12,6 @@ scanned piece and no blobs are for a human to check: comps/loops, and look at th
 expectation names it, mesh->scan <= 1e-3 (distance from mesh samples to the plane of the 8 nearest
 input points, i.e. to the scan's surface).
 """
-import datetime
 import os
 import platform
 import re
@@ -70,8 +69,8 @@ peer_txt = {'native': f'native PoissonRecon (mkazhdan/PoissonRecon, `--depth {de
             'open3d': f'Open3D screened Poisson (`create_from_point_cloud_poisson(depth={depth})`)',
             'none': 'none'}[peer]
 out = []
-out.append('# Real-scan benchmark (issue 12)\n')
-out.append(f'Measured: {label}, {datetime.date.today()}, {os.cpu_count()} cores, {platform.machine()} Linux' + (f' ({load}: the machine is shared, so wall times are noisy; cpu s = user + sys of the process is steadier)' if load else '') + '. '
+out.append('# Real-scan benchmark\n')
+out.append(f'Measured: {label}, {os.cpu_count()} cores, {platform.machine()} Linux' + (f' ({load}: the machine is shared, so wall times are noisy; cpu s = user + sys of the process is steadier)' if load else '') + '. '
            f'Command: `benches/realscans/prepare.sh BIN && benches/realscans/run.sh BIN`. rbfsurf runs with '
            f'**default parameters** (`rbfsurf reconstruct IN -o OUT.glb`). Peer: {peer_txt}; inputs without '
            'normals get Open3D normals first (15-NN PCA + `orient_normals_consistent_tangent_plane(15)`, '

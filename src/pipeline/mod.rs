@@ -268,19 +268,19 @@ pub(crate) fn point_colors(clean: &PointCloud, params: &ReconParams) -> Option<V
     )
 }
 
-/// Grid cells per point spacing of [`auto_resolution`]. Was 1 until measured (issue 14): at 0.75
+/// Grid cells per point spacing of [`auto_resolution`]. Measured against 1 cell: at 0.75
 /// the cells are 4/3 of the spacing and the real-scan statues (armadillo, camel, man, elephant,
 /// bunny, 10⁴–2.6·10⁴ points, with and without normals) keep their topology and their Chamfer
 /// distance to the truth (within ±1%, man 26k +7%) with 45% fewer triangles and about half the
-/// polygonization time; at 0.6 the camel gained a handle. 0.7 since measured with the chord
-/// error 0.03 (issue 12, twenty-third session): the clean bunny (37,706 points, vs `bunny00.off`)
+/// polygonization time; at 0.6 the camel gained a handle. 0.7 measured with the chord
+/// error 0.03: the clean bunny (37,706 points, vs `bunny00.off`)
 /// is grid-limited, Chamfer 4.5e-5 at 0.75 and 5.1e-5 at 0.6 without simplification, 4.8e-5 at 0.7
 /// with it; the 20 real-scan statues keep their topology and their Chamfer (geometric mean 0.98 ×
 /// that of 0.75 with the chord error 0.05, none worse by more than 1%) at the same wall time.
 const CELLS_PER_SPACING: f64 = 0.7;
 
 /// Grid resolution from the median point spacing (normalised units): [`CELLS_PER_SPACING`] cells
-/// per spacing, clamped to 64..=200. The cap was 320 until measured: at 10⁵–10⁶ points 200 cells gave equal or
+/// per spacing, clamped to 64..=200. Measured against a cap of 320: at 10⁵–10⁶ points 200 cells gave equal or
 /// lower Chamfer distance to the truth (torus 10⁵ 9.5e-6 vs 1.10e-5, bumpy sphere 6.3e-6 vs 7.7e-6,
 /// torus 10⁶ 4.9e-6 vs 5.2e-6, bunny vs bunny00 4.9e-5 vs 5.2e-5) in about half the time.
 pub fn auto_resolution(spacing: f64) -> usize {

@@ -5,7 +5,7 @@
 //! The extra samples use the base's normalisation frame and the base's pseudo-normal offset
 //! distance, so the combined constraint set is exactly the one a fresh solve would see; the run
 //! also performs that fresh solve (timed) and reports the largest coefficient and value
-//! differences. Cost: `O(N³/3)` for the base factor (done once per session in an interactive
+//! differences. Cost: `O(N³/3)` for the base factor (done once per editing run in an interactive
 //! tool), `O(N²M)` for the update, against `O((N+M)³/3)` for the fresh solve.
 
 use std::time::Instant;

@@ -1,4 +1,4 @@
-//! Volume modelling (issue 17): saved fields bit for bit, CSG against analytic solids, offsets,
+//! Volume modelling: saved fields bit for bit, CSG against analytic solids, offsets,
 //! voxel files read back, morph topology, bad input.
 
 use rbfsurf::frep::expr::{Loader, build};

@@ -1,4 +1,4 @@
-//! The polygonizer's skip test on real fitted fields (issue 14, item 4): extracting the zero set of a
+//! The polygonizer's skip test on real fitted fields: extracting the zero set of a
 //! field fitted to a real scan with the narrow band (blocks and tiles skipped by
 //! `may_contain_zero`, and tiles seeded from sign changes only, the default `Seeding`) gives exactly the mesh of extracting it everywhere, vertex for vertex, for the
 //! default local carrier (with its winding-number far field), for several levels and for a

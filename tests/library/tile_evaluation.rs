@@ -1,4 +1,4 @@
-//! The local carrier evaluated per tile from a gathered list of points (issue 14: no k-d tree
+//! The local carrier evaluated per tile from a gathered list of points (no k-d tree
 //! query per grid corner) against the reference path (an index query per point), on fields fitted
 //! to real scans: every corner of a lattice of polygonizer-sized tiles around the data, and points
 //! inside them, get the same value and gradient bit for bit, both where `R` holds at least K

@@ -1,4 +1,4 @@
-//! The service as a hostile client meets it (issue 15), on loopback where the transport matters:
+//! The service as a hostile client meets it, on loopback where the transport matters:
 //! budgets a request cannot lift, stalled and trickling uploads, degenerate uploads, impossible
 //! parameters, a full disk, internal errors without server paths, token scope, parameter
 //! conflicts, per-job memory and the synchronous `?wait` answers. Time bounds are generous

@@ -1,4 +1,4 @@
-//! Cancel and time limits inside long stages (issue 15): a dense variational factorisation and a
+//! Cancel and time limits inside long stages: a dense variational factorisation and a
 //! CSRBF assembly with a large support stop within a second of the timeout or the DELETE (the
 //! assertions allow 3 s on a loaded machine; the measured delay is printed), and DELETE right after
 //! POST never ends `succeeded`.
