@@ -18,6 +18,8 @@ pub mod error;
 pub mod frep;
 pub mod geometry;
 pub mod io;
+#[cfg(feature = "server")]
+pub mod job;
 pub mod linalg;
 pub mod mesh;
 pub mod normals;

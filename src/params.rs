@@ -1,11 +1,13 @@
 //! Reconstruction parameters: one definition shared by the library, the command line, the HTTP API
 //! and the report. Defaults live only in [`ReconParams::default`].
 
-use crate::clean::CleanParams;
-use crate::linalg::SolverKind;
-use crate::ordering::OrderingKind;
-use crate::rbf::{CarrierKind, CarrierParams, Kernel, LocalFit, Support};
-use crate::spatial::IndexKind;
+// The types of the parameters' fields, re-exported so that a caller names every parameter
+// through this module.
+pub use crate::clean::CleanParams;
+pub use crate::linalg::SolverKind;
+pub use crate::ordering::OrderingKind;
+pub use crate::rbf::{CarrierKind, CarrierParams, Kernel, LocalFit, Support};
+pub use crate::spatial::IndexKind;
 
 /// Optional polynomial part of the spline.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -1,6 +1,6 @@
 //! `rbfsurf serve` and `rbfsurf openapi`: flags → [`ServerConfig`], a tokio runtime, the server.
 
-use crate::server::config::ServerConfig;
+use crate::job::ServerConfig;
 use anyhow::{Context, Result, bail};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -171,7 +171,7 @@ pub fn run(a: &ServeArgs) -> Result<()> {
     #[cfg(feature = "nats")]
     if let Some(nats) = nats {
         return rt
-            .block_on(crate::dist::remote::serve_nats(cfg, nats))
+            .block_on(crate::server::nats::serve_nats(cfg, nats))
             .with_context(|| format!("serving on {addr} (jobs on NATS)"));
     }
     rt.block_on(crate::server::serve(cfg))

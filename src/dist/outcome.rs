@@ -5,8 +5,7 @@
 use super::objects;
 use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::steps::{Ctx, TaskError};
-use crate::server::error::ErrorBody;
-use crate::server::model::{JobStatus, unix_now};
+use crate::job::{ErrorBody, JobStatus, unix_now};
 use uuid::Uuid;
 
 /// Uploads every file of `dir` as `result/<file>`; returns the file names.

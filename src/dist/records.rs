@@ -5,8 +5,8 @@
 //! by exactly the update that made it.
 
 use super::DistError;
+use crate::job::JobView;
 use crate::params::ReconOptions;
-use crate::server::model::JobView;
 use async_nats::jetstream::kv;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 use std::time::Duration;

@@ -9,12 +9,9 @@ use super::connect::{self, NatsConfig, Resources};
 use super::objects;
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DELETE_CLAIM_STALE_MS, DagState, JobRecord, dag_key, job_key};
+use crate::job::{ErrorBody, JobBackend, JobManager, JobStatus, JobView, ServerConfig};
+use crate::job::{unix_now, unix_now_ms};
 use crate::params::ReconOptions;
-use crate::server::config::ServerConfig;
-use crate::server::error::ErrorBody;
-use crate::server::jobs::JobManager;
-use crate::server::model::{JobStatus, JobView, unix_now, unix_now_ms};
-use crate::server::remote::JobBackend;
 use async_nats::jetstream::kv::Operation;
 use futures_util::StreamExt;
 use std::sync::Arc;
@@ -286,37 +283,4 @@ async fn fetch_results(
             .map_err(DistError::nats("cache"))?;
     }
     Ok(())
-}
-
-/// A NATS-backed API node's state (its job manager over the backend, upload slots) and the
-/// task that mirrors the job records into it (abort it when the node stops).
-pub async fn start_node(
-    cfg: ServerConfig,
-    nats: &NatsConfig,
-) -> std::io::Result<(crate::server::AppState, tokio::task::JoinHandle<()>)> {
-    tracing::info!(nats = %connect::redact_url(&nats.url), "connecting to NATS");
-    let backend = connect_backend(nats).await.map_err(std::io::Error::other)?;
-    let permits = (2 * cfg.workers).max(2);
-    let mgr = {
-        let b: Arc<dyn JobBackend> = backend.clone();
-        tokio::task::spawn_blocking(move || JobManager::start_remote(cfg, b))
-            .await
-            .map_err(std::io::Error::other)??
-    };
-    let watcher = tokio::spawn(mirror(backend, Arc::clone(&mgr)));
-    let state = crate::server::AppState {
-        jobs: mgr,
-        uploads: Arc::new(tokio::sync::Semaphore::new(permits)),
-    };
-    Ok((state, watcher))
-}
-
-/// Runs a NATS-backed API node until Ctrl-C / SIGTERM.
-pub async fn serve_nats(cfg: ServerConfig, nats: NatsConfig) -> std::io::Result<()> {
-    let listener = tokio::net::TcpListener::bind(cfg.addr).await?;
-    let (state, watcher) = start_node(cfg, &nats).await?;
-    tracing::info!(addr = %listener.local_addr()?, "rbfsurf serve listening (jobs on NATS)");
-    let result = crate::server::serve_on(listener, state, crate::server::shutdown_signal()).await;
-    watcher.abort();
-    result
 }

@@ -11,6 +11,7 @@ use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::{DistError, connect::Resources};
 use crate::error::{ErrorKind, ReconError};
 use crate::io::{MeshFormat, PointFormat, ReadLimits};
+use crate::job::{ErrorBody, JobStatus, unix_now, unix_now_ms};
 use crate::params::ReconParams;
 use crate::pipeline::tiled::codec::{decode_region, encode_region};
 use crate::pipeline::tiled::graph::{self, BlockOutcome};
@@ -20,8 +21,6 @@ use crate::pipeline::tiled::{self, TiledError, TiledOptions};
 use crate::pipeline::{Execution, PointSource, RunError, RunOutput, plan_execution, run};
 use crate::progress::{Progress, Stage};
 use crate::report::Timings;
-use crate::server::error::ErrorBody;
-use crate::server::model::{JobStatus, unix_now, unix_now_ms};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -220,11 +219,8 @@ fn start(
             r.view.stage = Some(Stage::Read.name().into());
         }
     })?;
-    if [
-        crate::server::volume::COMPOSITION,
-        crate::server::volume::MORPH,
-    ]
-    .contains(&rec.view.input.format.as_str())
+    if [crate::job::volume::COMPOSITION, crate::job::volume::MORPH]
+        .contains(&rec.view.input.format.as_str())
     {
         return volume(ctx, rec, progress);
     }
@@ -234,7 +230,7 @@ fn start(
     ))?;
     let format =
         PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
-            TaskError::Job(crate::server::error::internal_body(
+            TaskError::Job(crate::job::error::internal_body(
                 "stored input has an unknown extension",
             ))
         })?;
@@ -281,7 +277,7 @@ fn run_error(e: RunError) -> TaskError {
             ..
         } => TaskError::Retry(s.to_string()),
         e @ (RunError::Read(_) | RunError::Write(_)) if e.kind() == ErrorKind::Internal => {
-            TaskError::Job(crate::server::error::internal_body(&e.to_string()))
+            TaskError::Job(crate::job::error::internal_body(&e.to_string()))
         }
         e => TaskError::Job(ErrorBody {
             code: e.kind().code().into(),
@@ -323,7 +319,7 @@ fn whole(
 /// saved fields come from their jobs' results in the object store, the mesh and report go to
 /// this job's results, as for a reconstruction.
 fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), TaskError> {
-    use crate::server::volume::{VolumeRequest, run_volume};
+    use crate::job::volume::{VolumeRequest, run_volume};
     let job = rec.view.id;
     let bytes = ctx.block_on(objects::get(
         &ctx.res.objects,

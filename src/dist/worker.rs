@@ -116,9 +116,10 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
     };
     let secs = started.elapsed().as_secs_f64();
     let result = result.unwrap_or_else(|e| {
-        Err(TaskError::Job(crate::server::error::internal_body(
-            &format!("task {label} of job {} panicked: {e}", task.job),
-        )))
+        Err(TaskError::Job(crate::job::error::internal_body(&format!(
+            "task {label} of job {} panicked: {e}",
+            task.job
+        ))))
     });
     match result {
         Ok(ran) => {
@@ -132,7 +133,7 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
         }
         Err(TaskError::Retry(m)) if delivered >= MAX_DELIVER => {
             tracing::error!(job = %task.job, task = %label, error = %m, "task failed on its last delivery; job failed");
-            let body = crate::server::error::internal_body(&m);
+            let body = crate::job::error::internal_body(&m);
             fail(&ctx, task, body).await;
             let _ = msg.ack().await;
         }
@@ -145,7 +146,7 @@ async fn handle(ctx: Arc<Ctx>, msg: Message) {
     }
 }
 
-async fn fail(ctx: &Arc<Ctx>, task: Task, body: crate::server::error::ErrorBody) {
+async fn fail(ctx: &Arc<Ctx>, task: Task, body: crate::job::error::ErrorBody) {
     let ctx = Arc::clone(ctx);
     let _ = tokio::task::spawn_blocking(move || {
         steps::finish_job(&ctx, task.job, steps::Outcome::Failed(body))

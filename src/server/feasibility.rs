@@ -4,11 +4,10 @@
 //! the cloud for 64 probe points), so a refusal comes within seconds even at the point limit.
 //! The estimates are deliberately simple; each refusal names the estimate and what to change.
 
-use super::config::ServerConfig;
 use super::error::ApiError;
 use crate::geometry::{Aabb, Normalization, Point3, PointCloud, dist2};
-use crate::params::{Method, ReconParams};
-use crate::rbf::Support;
+use crate::job::ServerConfig;
+use crate::params::{Method, ReconParams, Support};
 use axum::http::StatusCode;
 use rayon::prelude::*;
 

@@ -1,28 +1,22 @@
 //! The HTTP service (`rbfsurf serve`): the reconstruction library behind a REST API with a job
 //! queue, server-sent progress, an embedded WebGL viewer and an OpenAPI document.
 //!
-//! Layout: [`config`] (limits), [`error`] (JSON errors), [`model`] (the job record), [`jobs`]
-//! (queue, workers, progress, recovery), [`store`] (files under the data directory), [`routes`] (handlers), [`openapi`],
-//! [`volume`] (composition and morph jobs over finished jobs' fields).
+//! Layout: [`error`] (HTTP errors), [`feasibility`] (submit-time checks), [`routes`] (handlers),
+//! [`openapi`]; the job model, queue, store and limits below it are [`crate::job`].
 //! The server only calls the library (`io`, `params`, `reconstruct`); it adds no numerics.
 //! Design: the HTTP API section of the design notes; the seed's online server with browser view.
 
-pub mod config;
 pub mod error;
 pub mod feasibility;
-pub mod jobs;
-pub mod model;
+#[cfg(feature = "nats")]
+pub mod nats;
 pub mod openapi;
-pub mod remote;
 pub mod routes;
-pub mod store;
-pub mod volume;
 
+use crate::job::{JobManager, ServerConfig};
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::http::{HeaderValue, Method, header};
-use config::ServerConfig;
-use jobs::JobManager;
 use std::sync::Arc;
 use std::time::Duration;
 use tower_http::cors::{AllowOrigin, CorsLayer};

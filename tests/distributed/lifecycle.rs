@@ -130,7 +130,7 @@ fn node(
     dir: &Path,
     name: &str,
 ) -> (rbfsurf::server::AppState, String) {
-    let cfg = rbfsurf::server::config::ServerConfig {
+    let cfg = rbfsurf::job::ServerConfig {
         data_dir: dir.join(format!("{name}-data")),
         expire_after: Some(Duration::ZERO),
         ..Default::default()
@@ -141,7 +141,7 @@ fn node(
         ..Default::default()
     };
     let (state, _watcher) = rt
-        .block_on(rbfsurf::dist::remote::start_node(cfg, &nc))
+        .block_on(rbfsurf::server::nats::start_node(cfg, &nc))
         .unwrap();
     let listener = rt
         .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))

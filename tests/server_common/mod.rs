@@ -6,7 +6,7 @@ use axum::Router;
 use axum::body::Body;
 use axum::http::{HeaderMap, Request, StatusCode};
 use rbfsurf::geometry::synthetic::Shape;
-use rbfsurf::server::config::ServerConfig;
+use rbfsurf::job::ServerConfig;
 use rbfsurf::server::{AppState, router};
 use std::time::Duration;
 use tower::ServiceExt;

@@ -1066,7 +1066,7 @@ fn openapi_error_codes_name_every_code_the_server_emits() {
 #[test]
 fn openapi_parameter_constraints_are_the_servers() {
     use rbfsurf::server::routes::parse_params;
-    let cfg = rbfsurf::server::config::ServerConfig {
+    let cfg = rbfsurf::job::ServerConfig {
         max_resolution: 4096,
         ..Default::default()
     };

@@ -179,7 +179,7 @@ async fn two_hundred_jobs_from_twenty_clients_then_restart_mid_batch() {
         assert_eq!(status, 202);
         ids.push(job["id"].as_str().unwrap().to_string());
     }
-    let count_done = |jobs: &rbfsurf::server::jobs::JobManager| {
+    let count_done = |jobs: &rbfsurf::job::JobManager| {
         jobs.list()
             .iter()
             .filter(|j| j.status.is_terminal())

@@ -41,7 +41,7 @@ pub struct Health {
     responses((status = 200, body = Health), (status = 503, description = "shutting down", body = ErrorResponse)))]
 pub async fn health(State(st): State<AppState>) -> Result<Json<Health>, ApiError> {
     if st.jobs.is_shutting_down() {
-        return Err(crate::server::jobs::SubmitError::ShuttingDown.into());
+        return Err(crate::job::SubmitError::ShuttingDown.into());
     }
     let cfg = st.jobs.config();
     Ok(Json(Health {

@@ -8,9 +8,8 @@ pub mod reconstructions;
 pub mod upload;
 pub mod volume;
 
-use super::config::ServerConfig;
 use super::error::ApiError;
-use super::jobs::{Job, JobView};
+use crate::job::{Job, JobView, ServerConfig};
 use crate::params::{ReconOptions, ReconParams};
 use axum::http::{HeaderMap, StatusCode, header};
 use serde::{Deserialize, Serialize};

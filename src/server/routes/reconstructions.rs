@@ -9,10 +9,10 @@ use super::upload::{
 };
 use super::{JobResponse, WaitQuery, authorize, find_job, job_response, parse_params, query_pairs};
 use crate::io::{MeshFormat, MeshMeta, decode_glb, glb_crs, write_mesh_with};
+use crate::job::store::input_ext;
+use crate::job::{ErrorBody, InputInfo, Job, JobStatus, JobView};
 use crate::server::AppState;
-use crate::server::error::{ApiError, ErrorBody, ErrorResponse};
-use crate::server::jobs::{InputInfo, Job, JobStatus, JobView};
-use crate::server::store::input_ext;
+use crate::server::error::{ApiError, ErrorResponse};
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, RawQuery, Request, State};
@@ -71,7 +71,7 @@ pub async fn create_job(
     let cfg = st.jobs.config();
     authorize(cfg.token.as_deref(), req.headers())?;
     if st.jobs.is_shutting_down() {
-        return Err(crate::server::jobs::SubmitError::ShuttingDown.into());
+        return Err(crate::job::SubmitError::ShuttingDown.into());
     }
     let mut pairs = query_pairs(raw.as_deref())?;
     let declared = req
@@ -85,7 +85,7 @@ pub async fn create_job(
     parse_params(&pairs, cfg)?;
     let kind = classify(req.headers())?;
     if !st.jobs.has_room() {
-        return Err(crate::server::jobs::SubmitError::QueueFull.into());
+        return Err(crate::job::SubmitError::QueueFull.into());
     }
     // At most a few uploads are buffered and parsed at once; others wait briefly, then get 429.
     let permit = tokio::time::timeout(cfg.upload_slot_wait, st.uploads.clone().acquire_owned())

@@ -4,8 +4,8 @@
 
 use super::Pairs;
 use crate::io::{PointFormat, ReadLimits, parse_point_cloud};
+use crate::job::ServerConfig;
 use crate::server::AppState;
-use crate::server::config::ServerConfig;
 use crate::server::error::ApiError;
 use axum::body::Body;
 use axum::extract::{FromRequest, Multipart, Request};

@@ -4,12 +4,12 @@
 //! (`/v1/reconstructions/{id}…`).
 
 use super::{authorize, job_response};
-use crate::server::AppState;
-use crate::server::error::{ApiError, ErrorResponse};
-use crate::server::jobs::{InputInfo, JobStatus};
-use crate::server::volume::{
+use crate::job::volume::{
     COMPOSITION, CompositionRequest, MORPH, MorphRequest, REQUEST_FILE, VolumeRequest,
 };
+use crate::job::{InputInfo, JobStatus};
+use crate::server::AppState;
+use crate::server::error::{ApiError, ErrorResponse};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::State;
@@ -27,7 +27,7 @@ async fn submit(
     let cfg = st.jobs.config();
     authorize(cfg.token.as_deref(), headers)?;
     if st.jobs.is_shutting_down() {
-        return Err(crate::server::jobs::SubmitError::ShuttingDown.into());
+        return Err(crate::job::SubmitError::ShuttingDown.into());
     }
     let ids = req.validate().map_err(ApiError::bad_parameter)?;
     for id in &ids {
@@ -54,7 +54,7 @@ async fn submit(
         }
     }
     if !st.jobs.has_room() {
-        return Err(crate::server::jobs::SubmitError::QueueFull.into());
+        return Err(crate::job::SubmitError::QueueFull.into());
     }
     let bytes = serde_json::to_vec_pretty(&req).map_err(|e| ApiError::internal(e.to_string()))?;
     let info = InputInfo {

@@ -4,7 +4,7 @@
 //! embedded service. The data directory holds only results copied from the backend.
 
 use super::config::ServerConfig;
-use super::jobs::{Job, JobManager, SubmitError, read, write};
+use super::manager::{Job, JobManager, SubmitError, read, write};
 use super::model::{InputInfo, JobView};
 use super::store::Store;
 use crate::params::ReconOptions;

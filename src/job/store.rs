@@ -5,7 +5,7 @@
 //! Every file is written atomically (temporary file + rename), so a crash leaves either the old or
 //! the new version. Scanning is O(jobs).
 
-use super::jobs::{JobStatus, JobView};
+use super::model::{JobStatus, JobView};
 use crate::io::{IoError, PointFormat, write_atomic};
 use crate::params::ReconOptions;
 use std::path::{Path, PathBuf};

@@ -8,14 +8,13 @@
 //! the restart. Queue operations are O(1); a scan at start-up is O(stored jobs).
 
 use super::config::ServerConfig;
-use super::error::{ApiError, ErrorBody};
+use super::error::ErrorBody;
 use super::store::{Store, unfinished};
 use crate::error::ErrorKind;
 use crate::io::{MeshFormat, PointFormat, ReadLimits};
 use crate::params::ReconParams;
 use crate::pipeline::run::{PointSource, RunError, RunOutput, run};
 use crate::progress::{Progress, Stage};
-use axum::http::StatusCode;
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, RwLock};
@@ -24,7 +23,7 @@ use tokio::sync::watch;
 use uuid::Uuid;
 
 use super::model::unix_now_ms;
-pub use super::model::{InputInfo, JobStatus, JobView, unix_now};
+use super::model::{InputInfo, JobStatus, JobView, unix_now};
 
 /// One job: its observable state plus the control flags the worker polls.
 pub struct Job {
@@ -128,35 +127,6 @@ pub enum SubmitError {
     Storage(crate::io::IoError),
     /// The job store (NATS) did not take the job.
     Backend(String),
-}
-
-impl From<SubmitError> for ApiError {
-    fn from(e: SubmitError) -> Self {
-        match e {
-            SubmitError::QueueFull => ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "queue_full",
-                "the job queue is full; retry after the Retry-After delay",
-            )
-            .retry_after(5),
-            SubmitError::ShuttingDown => ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "shutting_down",
-                "the server is shutting down; retry against the restarted server",
-            )
-            .retry_after(10),
-            SubmitError::Storage(e) => ApiError::from(e),
-            SubmitError::Backend(detail) => {
-                tracing::error!(%detail, "the job store did not take the job");
-                ApiError::new(
-                    StatusCode::SERVICE_UNAVAILABLE,
-                    "job_store_unavailable",
-                    "the job store is unavailable; retry after the Retry-After delay",
-                )
-                .retry_after(5)
-            }
-        }
-    }
 }
 
 impl JobManager {
@@ -500,8 +470,12 @@ impl JobManager {
             .store
             .load_options(job.id)
             .map_err(JobError::internal)?;
-        let params = ReconParams::try_from(&options)
-            .map_err(|e| JobError::Failed(ApiError::from(e).body))?;
+        let params = ReconParams::try_from(&options).map_err(|e| {
+            JobError::Failed(ErrorBody {
+                code: ErrorKind::BadParameter.code().into(),
+                message: e.to_string(),
+            })
+        })?;
         let data = std::fs::read(self.store.file(job.id, &view.input.file))
             .map_err(|e| JobError::internal(format!("stored input unreadable: {e}")))?;
         let format = PointFormat::from_path(std::path::Path::new(&view.input.file))

@@ -1,0 +1,20 @@
+//! The job model shared by the HTTP service (`server`) and the distributed executor
+//! (`dist`): the job record ([`model`]), its error ([`error`]), the service limits
+//! ([`config`]), the files of a job under the data directory ([`store`]), composition and morph
+//! jobs ([`volume`]), and the [`JobManager`] that queues and runs jobs in this process or on a
+//! [`JobBackend`] ([`remote`]). Nothing here speaks HTTP; the server and the NATS executor both
+//! build on it.
+
+pub mod config;
+pub mod error;
+pub mod manager;
+pub mod model;
+pub mod remote;
+pub mod store;
+pub mod volume;
+
+pub use config::ServerConfig;
+pub use error::ErrorBody;
+pub use manager::{Job, JobManager, SubmitError};
+pub use model::{InputInfo, JobStatus, JobView, unix_now, unix_now_ms};
+pub use remote::JobBackend;
