@@ -1,4 +1,4 @@
-//! The JSON report of a reconstruction (keys are a contract, see README "Report").
+//! The JSON report of a reconstruction (keys are a contract, see docs/report.md).
 
 use crate::clean::CleanStats;
 use crate::mesh::topology::MeshTopology;

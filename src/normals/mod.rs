@@ -5,8 +5,8 @@
 //! inward regions ([`regions`]) and, on closed clean surfaces, each point by ray parity
 //! ([`parity`]).
 //!
-//! Measured against true normals with `cargo run --release --example normal_flips` (table in
-//! the README, section "Normals without input normals").
+//! Measured against true normals with `cargo run --release --example normal_flips` (figures in
+//! docs/robustness.md, section "Normals against the truth").
 
 mod dipole;
 mod estimate;

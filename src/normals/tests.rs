@@ -1,5 +1,5 @@
 //! Estimated normals against the true normals of generated shapes, including thin and open ones.
-//! The bounds are the ones stated in the README table (section "Normals without input normals").
+//! The bounds are the ones docs/robustness.md summarises (section "Normals against the truth").
 
 use crate::geometry::synthetic::{Coverage, Defects, Shape, apply_defects};
 use crate::geometry::{Point3, PointCloud, dot, norm};

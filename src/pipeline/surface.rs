@@ -22,23 +22,21 @@
 //! inside the domain (a sheet too thin for the coarse pass, or one beside data that surround
 //! their middle): it is trimmed like an open scan.
 //!
-//! Open surfaces are polygonized only in the band the data support ([`DataBand`]: cells whose centre
-//! is within the support radius plus half a cell diagonal of a point), then the triangles whose
-//! centroid is farther than the support radius from every point are dropped (the rule used when the
-//! whole domain was polygonized and trimmed) except pinholes enclosed by kept surface
-//! ([`trim::keep_enclosed_holes`]: a data gap wider than the band stays a hole, a gap barely wider
-//! than the trim radius no longer leaves a one-triangle hole), and bow-tie vertices are removed
-//! ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary loop per
-//! border or hole. Every surface then loses its floaters (components carried by fewer than
+//! Open surfaces are polygonized only in the band the data support ([`DataBand`]: cells whose
+//! centre is within the support radius plus half a cell diagonal of a point), then the triangles
+//! whose centroid is farther than the support radius from every point are dropped, except pinholes
+//! enclosed by kept surface ([`trim::keep_enclosed_holes`]: a data gap wider than the band stays a
+//! hole, a gap barely wider than the trim radius leaves no one-triangle hole), and bow-tie vertices
+//! are removed ([`crate::mesh::border`]): one manifold sheet per connected scan piece, one boundary
+//! loop per border or hole. Every surface then loses its floaters (components carried by fewer than
 //! `min_support` of the points, [`crate::mesh::floaters`]) and, with `--min-component`, its small
 //! pieces; an open one then has its border peeled back to `border_reach` support radii from the
 //! data wherever that keeps the pieces, holes and handles ([`crate::mesh::peel`]: the trim radius
 //! bridges the gaps between returns, the peel removes the overhang beyond the last ones); every
 //! surface is then simplified to the chord-error tolerance ([`crate::mesh::simplify`], topology
-//! kept).
-//! A closed surface then loses its small handles ([`crate::mesh::handles`]): bridges and pinholes
-//! whose shortest loop around is at most `max_handle_loop` support radii, where two parts came
-//! closer than the data separate them.
+//! kept). A closed surface then loses its small handles ([`crate::mesh::handles`]): bridges and
+//! pinholes whose shortest loop around is at most `max_handle_loop` support radii, where two parts
+//! came closer than the data separate them.
 
 use super::FittedField;
 use crate::error::ReconError;

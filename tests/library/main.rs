@@ -5,6 +5,7 @@
 mod adaptive;
 #[path = "../common/mod.rs"]
 mod common;
+mod docs_links;
 mod frep;
 mod large;
 mod open_scans;

@@ -478,7 +478,7 @@ mod tests {
         let e = estimate(10_000_000, 512, 2);
         assert_eq!(e.concurrency, 1, "{e:?}");
         assert!(e.peak_mib <= 512.0 && e.block_points > 100_000, "{e:?}");
-        // Prepare no longer grows with the cloud.
+        // Prepare does not grow with the cloud.
         let big = estimate(1_000_000_000, 1536, 2);
         assert!((big.prepare_mib - e.prepare_mib).abs() < 200.0 && big.peak_mib <= 1536.0);
         // The distributed test's small budget: blocks of ~2,600 core points, within it.

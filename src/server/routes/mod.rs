@@ -26,7 +26,7 @@ pub struct JobResponse {
     pub status_url: String,
     /// URLs of the related resources.
     pub links: JobLinks,
-    /// The reconstruction report (see the README's report contract) once the job succeeded.
+    /// The reconstruction report (the contract: docs/report.md) once the job succeeded.
     #[schema(value_type = Option<Object>)]
     pub report: Option<serde_json::Value>,
 }

@@ -446,7 +446,7 @@ pub async fn job_field(
         .into_response())
 }
 
-/// The reconstruction report (JSON contract of the README).
+/// The reconstruction report (JSON contract: docs/report.md).
 #[utoipa::path(get, path = "/v1/reconstructions/{id}/report", tag = "reconstructions",
     params(("id" = String, Path, description = "job id (UUID)")),
     responses((status = 200, description = "the report", body = Object),
