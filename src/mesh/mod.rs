@@ -14,6 +14,7 @@ pub mod compare;
 mod distance;
 pub mod floaters;
 pub mod handles;
+pub(crate) mod incidence;
 pub mod lod;
 pub mod optimize;
 pub mod peel;
