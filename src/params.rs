@@ -3,7 +3,7 @@
 
 // The types of the parameters' fields, re-exported so that a caller names every parameter
 // through this module.
-pub use crate::clean::CleanParams;
+pub use crate::clean::{CleanParams, OutlierParams};
 pub use crate::linalg::SolverKind;
 pub use crate::ordering::OrderingKind;
 pub use crate::rbf::{CarrierKind, CarrierParams, Kernel, LocalFit, Support};
@@ -150,7 +150,7 @@ pub struct ReconParams {
     /// [`crate::rbf::noise`]).
     pub smoothing: Smoothing,
     /// Statistical outlier removal before fitting (default off).
-    pub outliers: Option<crate::clean::outliers::OutlierParams>,
+    pub outliers: Option<OutlierParams>,
     /// Unsupported surface: trim or keep (default `auto`).
     pub boundary: Boundary,
     /// CSRBF levels, coarse to fine, each halving the support radius (default 1: the seed's single

@@ -31,7 +31,7 @@ pub(crate) mod graph;
 mod merge;
 pub(crate) mod prepare;
 mod route;
-pub mod store;
+pub(crate) mod store;
 mod survey;
 mod tasks;
 
