@@ -1,4 +1,6 @@
-//! The library's top-level error: one variant per stage, each wrapping that stage's own error.
+//! The library's top-level error: one variant per stage, each wrapping that stage's own error,
+//! plus the refusals of the pipeline itself (the memory budget, what the out-of-core path cannot
+//! do) and the error of the out-of-core store ([`StoreError`]).
 
 /// Anything that can stop a reconstruction.
 #[derive(Debug, thiserror::Error)]
@@ -45,12 +47,82 @@ pub enum ReconError {
         /// The budget, MiB.
         budget_mib: u64,
     },
-    /// The out-of-core task graph refused the input or its store failed.
+    /// Out of core, the local carrier needs normals and the input has none.
+    #[error(
+        "out-of-core reconstruction with the local carrier needs oriented normals in the input \
+         (estimating them needs the whole cloud in memory); give points with normals, use \
+         --carrier ellipsoid or sphere, or raise --max-memory-mib"
+    )]
+    NeedsNormals,
+    /// Out of core, the normals disagree between neighbours (they cannot be reoriented there).
+    #[error(
+        "{:.0}% of neighbouring normals point in opposite directions; out-of-core reconstruction \
+         cannot reorient them (that needs the whole cloud): orient the normals or raise --max-memory-mib",
+        share * 100.0
+    )]
+    InconsistentNormals {
+        /// Share of opposed neighbour pairs.
+        share: f64,
+    },
+    /// An option the out-of-core task graph does not implement.
+    #[error(
+        "{0} is not available for out-of-core reconstruction (the cloud is over the memory budget); \
+         leave it out or raise --max-memory-mib"
+    )]
+    OutOfCoreUnsupported(&'static str),
+    /// Even out of core the reconstruction does not fit the budget.
+    #[error(
+        "{points} points need about {mib:.0} MiB even out of core (the subsample, the partition's \
+         buffers and the smallest block's system), more than the memory budget of {budget_mib} MiB; \
+         raise --max-memory-mib"
+    )]
+    OutOfCoreOverBudget {
+        /// Points in the input.
+        points: u64,
+        /// Estimated out-of-core peak, MiB.
+        mib: f64,
+        /// The budget, MiB.
+        budget_mib: u64,
+    },
+    /// More finite points than the out-of-core path's 32-bit point ids number.
+    #[error(
+        "more than 4294967295 finite points: out-of-core reconstruction numbers points with 32-bit \
+         ids; split the scan"
+    )]
+    TooManyIds,
+    /// The out-of-core store of intermediate results failed.
     #[error(transparent)]
-    Tiled(#[from] crate::pipeline::tiled::TiledError),
+    Store(#[from] StoreError),
+    /// Streaming the input out of core failed (the readers' own error).
+    #[error(transparent)]
+    Read(crate::io::IoError),
     /// The caller cancelled.
     #[error("cancelled")]
     Cancelled,
+}
+
+/// Why the out-of-core store of intermediate results failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StoreError {
+    /// A temporary file could not be created, written or read.
+    #[error(
+        "out-of-core store {path}: {source}; free disk space there or set TMPDIR to a larger disk"
+    )]
+    Io {
+        /// The file or directory.
+        path: std::path::PathBuf,
+        /// The system's error.
+        source: std::io::Error,
+    },
+    /// A stored value is missing or does not decode (a bug or a damaged file).
+    #[error("out-of-core store: {key} is missing or damaged ({what})")]
+    Corrupt {
+        /// The key.
+        key: String,
+        /// What was wrong.
+        what: &'static str,
+    },
 }
 
 impl From<crate::rbf::CarrierError> for ReconError {
@@ -159,8 +231,14 @@ impl ReconError {
                     crate::polygonize::PolygonizeError::GridTooLarge { .. }
                     | crate::polygonize::PolygonizeError::TooManyVertices { .. },
                 )
-                | ReconError::TooManyPoints { .. } => ErrorKind::OverBudget,
-                ReconError::Tiled(e) => e.kind(),
+                | ReconError::TooManyPoints { .. }
+                | ReconError::OutOfCoreOverBudget { .. }
+                | ReconError::TooManyIds => ErrorKind::OverBudget,
+                ReconError::NeedsNormals | ReconError::InconsistentNormals { .. } => {
+                    ErrorKind::Unreconstructable
+                }
+                ReconError::OutOfCoreUnsupported(_) => ErrorKind::BadParameter,
+                ReconError::Read(e) => e.kind(),
                 _ => ErrorKind::Internal,
             }
         }

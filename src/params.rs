@@ -3,7 +3,7 @@
 
 // The types of the parameters' fields, re-exported so that a caller names every parameter
 // through this module.
-pub use crate::clean::CleanParams;
+pub use crate::clean::{CleanParams, OutlierParams};
 pub use crate::linalg::SolverKind;
 pub use crate::ordering::OrderingKind;
 pub use crate::rbf::{CarrierKind, CarrierParams, Kernel, LocalFit, Support};
@@ -150,7 +150,7 @@ pub struct ReconParams {
     /// [`crate::rbf::noise`]).
     pub smoothing: Smoothing,
     /// Statistical outlier removal before fitting (default off).
-    pub outliers: Option<crate::clean::outliers::OutlierParams>,
+    pub outliers: Option<OutlierParams>,
     /// Unsupported surface: trim or keep (default `auto`).
     pub boundary: Boundary,
     /// CSRBF levels, coarse to fine, each halving the support radius (default 1: the seed's single
@@ -297,7 +297,7 @@ pub struct ParamError {
     /// The offending value.
     pub value: String,
     /// What is allowed.
-    pub expected: &'static str,
+    pub expected: std::borrow::Cow<'static, str>,
 }
 
 /// The allowed values of one numeric parameter: the single definition that
@@ -314,6 +314,10 @@ pub struct Range {
     pub exclusive_min: bool,
     /// Upper bound (inclusive), if any.
     pub max: Option<f64>,
+    /// What the value is, said before its bounds in an error (`a radius`, `an integer`).
+    pub what: &'static str,
+    /// Said after the bounds in an error (units, a hint); may be empty.
+    pub note: &'static str,
 }
 
 impl Range {
@@ -324,6 +328,8 @@ impl Range {
             min: min as f64,
             exclusive_min: false,
             max: Some(max as f64),
+            what: "an integer",
+            note: "",
         }
     }
 
@@ -334,7 +340,40 @@ impl Range {
             min,
             exclusive_min,
             max,
+            what: "a number",
+            note: "",
         }
+    }
+
+    /// The same range, described as `what` … `note` in its error.
+    const fn said(self, what: &'static str, note: &'static str) -> Range {
+        Range { what, note, ..self }
+    }
+
+    /// The allowed values in words, from the bounds themselves: `an integer in 4..=2000`,
+    /// `a radius in (0, 2] normalised units (…)`, `a number > 0 (e.g. 2.5)`.
+    pub fn expected(&self) -> String {
+        let open = if self.exclusive_min { "(" } else { "[" };
+        let bounds = match self.max {
+            Some(max) if self.integer => format!("in {}..={max}", self.min),
+            Some(max) => format!("in {open}{}, {max}]", self.min),
+            None if self.exclusive_min => format!("> {}", self.min),
+            None => format!(">= {}", self.min),
+        };
+        format!("{} {bounds}{}", self.what, self.note)
+    }
+
+    /// `Ok` when `v` is inside the range, else the error naming this parameter with the
+    /// value as `shown`.
+    pub fn check(&self, v: f64, shown: impl ToString) -> Result<(), ParamError> {
+        if self.contains(v) {
+            return Ok(());
+        }
+        Err(ParamError {
+            name: self.name,
+            value: shown.to_string(),
+            expected: self.expected().into(),
+        })
     }
 
     /// True when `v` is finite and inside the range.
@@ -350,7 +389,10 @@ impl Range {
 }
 
 /// `support`: a radius in (0, 2] normalised units.
-pub const SUPPORT: Range = Range::num("support", 0.0, true, Some(2.0));
+pub const SUPPORT: Range = Range::num("support", 0.0, true, Some(2.0)).said(
+    "a radius",
+    " normalised units (the longest bbox edge is 1)",
+);
 /// `neighbours`: 4..=2000.
 pub const NEIGHBOURS: Range = Range::int("neighbours", 4, 2000);
 /// `resolution`: 8..=4096 (a server may allow less).
@@ -358,29 +400,41 @@ pub const RESOLUTION: Range = Range::int("resolution", 8, 4096);
 /// `leaf-size`: 1..=4096.
 pub const LEAF_SIZE: Range = Range::int("leaf-size", 1, 4096);
 /// `merge-tolerance`: [0, 0.01] of the bbox diagonal.
-pub const MERGE_TOLERANCE: Range = Range::num("merge-tolerance", 0.0, false, Some(1e-2));
+pub const MERGE_TOLERANCE: Range = Range::num("merge-tolerance", 0.0, false, Some(1e-2))
+    .said("a fraction of the bbox diagonal", "");
 /// `max-memory-mib`: 16..=4194304 (a server caps it at its own budget).
-pub const MAX_MEMORY_MIB: Range = Range::int("max-memory-mib", 16, 1 << 22);
+pub const MAX_MEMORY_MIB: Range = Range::int("max-memory-mib", 16, 1 << 22).said("MiB", "");
 /// `smoothing`: λ in [0, 10].
 pub const SMOOTHING: Range = Range::num("smoothing", 0.0, false, Some(10.0));
 /// `outlier-std-ratio`: positive.
-pub const OUTLIER_STD_RATIO: Range = Range::num("outlier-std-ratio", 0.0, true, None);
+pub const OUTLIER_STD_RATIO: Range =
+    Range::num("outlier-std-ratio", 0.0, true, None).said("a number", " (e.g. 2.5)");
+/// The outlier test's neighbour count (16 from the options): 2..=200.
+pub const OUTLIER_NEIGHBOURS: Range = Range::int("outlier-neighbours", 2, 200);
 /// `levels`: 1..=8.
 pub const LEVELS: Range = Range::int("levels", 1, 8);
 /// `min-component`: [0, 1].
-pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.0));
+pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.0))
+    .said("a fraction of the largest component", "");
 /// `min-support`: [0, 0.5].
-pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5));
+pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5))
+    .said("a fraction of the data points", "");
 /// `max-handle-loop`: [0, 4] support radii. Real handles can be that short (the elephant's trunk
 /// and legs: 3.5 R on a 10k sample), and the search's cost grows steeply with the length (man 26k
 /// `x y z`, idle: 0.9 s at 2 R, 8.3 s at 4 R, 93 s at 8 R).
-pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Some(4.0));
+pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Some(4.0)).said(
+    "a loop length in support radii",
+    " (0 keeps every handle)",
+);
 /// Default `max-handle-loop`, support radii: the spurious handles of 10k-point statue samples
 /// measured 0.1–2.0 R; the real ones measured 3.5 R and more (the elephant's).
 pub const DEFAULT_MAX_HANDLE_LOOP: f64 = 2.0;
 /// `border-reach`: [0.25, 1] support radii. Below a quarter radius the border would be peeled into
 /// the band between samples, where the surface is an interpolation anyway.
-pub const BORDER_REACH: Range = Range::num("border-reach", 0.25, false, Some(1.0));
+pub const BORDER_REACH: Range = Range::num("border-reach", 0.25, false, Some(1.0)).said(
+    "a distance in support radii",
+    " (1 keeps the trim's border)",
+);
 /// Default `border-reach`, support radii: on the outdoor scene b9 the mesh→scan mean distance of
 /// the surface within 0.25 R of a point is 4.7e-4 of the diagonal, between 0.25 R and R 2–5e-3.
 pub const DEFAULT_BORDER_REACH: f64 = 0.5;
@@ -466,107 +520,38 @@ impl ReconParams {
 
     /// Check ranges; the command line and the HTTP API call this before any work.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let err = |name, value: String, expected| {
-            Err(ParamError {
-                name,
-                value,
-                expected,
-            })
-        };
         match self.support {
-            Support::Radius(r) if !SUPPORT.contains(r) => {
-                return err(
-                    "support",
-                    r.to_string(),
-                    "a radius in (0, 2] normalised units (the longest bbox edge is 1)",
-                );
-            }
-            Support::Neighbours(k) if !NEIGHBOURS.contains(k as f64) => {
-                return err("neighbours", k.to_string(), "an integer in 4..=2000");
-            }
-            _ => {}
+            Support::Radius(r) => SUPPORT.check(r, r)?,
+            Support::Neighbours(k) => NEIGHBOURS.check(k as f64, k)?,
         }
-        if let Some(r) = self.resolution
-            && !RESOLUTION.contains(r as f64)
-        {
-            return err("resolution", r.to_string(), "an integer in 8..=4096");
+        if let Some(r) = self.resolution {
+            RESOLUTION.check(r as f64, r)?;
         }
-        if !LEAF_SIZE.contains(self.leaf_size as f64) {
-            return err(
-                "leaf-size",
-                self.leaf_size.to_string(),
-                "an integer in 1..=4096",
-            );
-        }
+        LEAF_SIZE.check(self.leaf_size as f64, self.leaf_size)?;
         let tol = self.clean.merge_tolerance;
-        if !MERGE_TOLERANCE.contains(tol) {
-            return err(
-                "merge-tolerance",
-                tol.to_string(),
-                "a fraction of the bbox diagonal in [0, 0.01]",
-            );
+        MERGE_TOLERANCE.check(tol, tol)?;
+        if let Smoothing::Lambda(l) = self.smoothing {
+            SMOOTHING.check(l, l)?;
         }
-        if let Smoothing::Lambda(l) = self.smoothing
-            && !SMOOTHING.contains(l)
-        {
-            return err("smoothing", l.to_string(), "a number in [0, 10]");
+        if let Some(o) = self.outliers {
+            OUTLIER_STD_RATIO.check(o.std_ratio, o.std_ratio)?;
+            OUTLIER_NEIGHBOURS.check(o.neighbours as f64, o.neighbours)?;
         }
-        if let Some(o) = self.outliers
-            && !(OUTLIER_STD_RATIO.contains(o.std_ratio) && (2..=200).contains(&o.neighbours))
-        {
-            return err(
-                "outlier-std-ratio",
-                o.std_ratio.to_string(),
-                "a positive number (e.g. 2.5)",
-            );
-        }
-        if !MIN_COMPONENT.contains(self.min_component) {
-            return err(
-                "min-component",
-                self.min_component.to_string(),
-                "a fraction of the largest component in [0, 1]",
-            );
-        }
-        if !MIN_SUPPORT.contains(self.min_support) {
-            return err(
-                "min-support",
-                self.min_support.to_string(),
-                "a fraction of the data points in [0, 0.5]",
-            );
-        }
-        if !MAX_HANDLE_LOOP.contains(self.max_handle_loop) {
-            return err(
-                "max-handle-loop",
-                self.max_handle_loop.to_string(),
-                "a loop length in support radii in [0, 4] (0 keeps every handle)",
-            );
-        }
-        if !BORDER_REACH.contains(self.border_reach) {
-            return err(
-                "border-reach",
-                self.border_reach.to_string(),
-                "a distance in support radii in [0.25, 1] (1 keeps the trim's border)",
-            );
-        }
+        MIN_COMPONENT.check(self.min_component, self.min_component)?;
+        MIN_SUPPORT.check(self.min_support, self.min_support)?;
+        MAX_HANDLE_LOOP.check(self.max_handle_loop, self.max_handle_loop)?;
+        BORDER_REACH.check(self.border_reach, self.border_reach)?;
         if let ChordTolerance::Spacing(x) = self.chord_error
             && !(x.is_finite() && x > 0.0 && x <= 2.0)
         {
-            return err(
-                "chord-error",
-                x.to_string(),
-                "off or a fraction of the point spacing in (0, 2]",
-            );
+            return Err(ParamError {
+                name: "chord-error",
+                value: x.to_string(),
+                expected: "off or a fraction of the point spacing in (0, 2]".into(),
+            });
         }
-        if !LEVELS.contains(self.levels as f64) {
-            return err("levels", self.levels.to_string(), "an integer in 1..=8");
-        }
-        if !MAX_MEMORY_MIB.contains(self.max_memory_mib as f64) {
-            return err(
-                "max-memory-mib",
-                self.max_memory_mib.to_string(),
-                "MiB in 16..=4194304",
-            );
-        }
+        LEVELS.check(self.levels as f64, self.levels)?;
+        MAX_MEMORY_MIB.check(self.max_memory_mib as f64, self.max_memory_mib)?;
         Ok(())
     }
 }
@@ -726,21 +711,15 @@ impl TryFrom<&ReconOptions> for ReconParams {
                 return Err(ParamError {
                     name: "neighbours",
                     value: k.to_string(),
-                    expected: "either support (a radius) or neighbours (a count), not both",
+                    expected: "either support (a radius) or neighbours (a count), not both".into(),
                 });
             }
             (Some(r), None) => Support::Radius(r),
             (None, Some(k)) => Support::Neighbours(k),
             (None, None) => d.support,
         };
-        if let Some(n) = a.lods
-            && !LODS.contains(n as f64)
-        {
-            return Err(ParamError {
-                name: "lods",
-                value: n.to_string(),
-                expected: "an integer in 0..=8",
-            });
+        if let Some(n) = a.lods {
+            LODS.check(n as f64, n)?;
         }
         let method = a.method.unwrap_or(d.method);
         if method != Method::Csrbf
@@ -752,7 +731,7 @@ impl TryFrom<&ReconOptions> for ReconParams {
             return Err(ParamError {
                 name,
                 value,
-                expected: "only with method csrbf (variational and mls choose their own scale)",
+                expected: "only with method csrbf (variational and mls choose their own scale)".into(),
             });
         }
         let p = ReconParams {
@@ -880,5 +859,34 @@ mod tests {
         let round: ReconOptions =
             serde_json::from_str(&serde_json::to_string(&o).unwrap()).unwrap();
         assert_eq!(round, o);
+    }
+
+    #[test]
+    fn range_errors_say_the_bounds_of_the_range_itself() {
+        assert_eq!(NEIGHBOURS.expected(), "an integer in 4..=2000");
+        assert_eq!(MAX_MEMORY_MIB.expected(), "MiB in 16..=4194304");
+        assert_eq!(
+            SUPPORT.expected(),
+            "a radius in (0, 2] normalised units (the longest bbox edge is 1)"
+        );
+        assert_eq!(
+            MERGE_TOLERANCE.expected(),
+            "a fraction of the bbox diagonal in [0, 0.01]"
+        );
+        assert_eq!(OUTLIER_STD_RATIO.expected(), "a number > 0 (e.g. 2.5)");
+        let p = ReconParams {
+            resolution: Some(4097),
+            ..Default::default()
+        };
+        let e = p.validate().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "invalid parameter resolution = 4097: an integer in 8..=4096"
+        );
+        let p = ReconParams {
+            smoothing: Smoothing::Lambda(f64::INFINITY),
+            ..Default::default()
+        };
+        assert_eq!(p.validate().unwrap_err().expected, "a number in [0, 10]");
     }
 }

@@ -11,8 +11,10 @@ use crate::geometry::{Aabb, Point3, PointCloud, normalized};
 use crate::spatial::{IndexKind, SpatialError, build_index};
 use rayon::prelude::*;
 
-pub mod outliers;
-pub mod strays;
+pub(crate) mod outliers;
+pub(crate) mod strays;
+
+pub use outliers::OutlierParams;
 
 /// Cleaning parameters.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -7,7 +7,7 @@ mod curve;
 mod frep;
 mod generate;
 mod http;
-pub mod progress;
+pub(crate) mod progress;
 mod reconstruct;
 #[cfg(feature = "server")]
 mod serve;

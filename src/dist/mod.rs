@@ -20,14 +20,14 @@
 //! Every task writes only keys named by its job and block or region, and every publish carries
 //! a message id (JetStream drops duplicates), so a redelivered task repeats the same writes.
 
-pub mod connect;
+pub(crate) mod connect;
 mod objects;
 mod outcome;
 mod queue;
 mod records;
-pub mod remote;
+pub(crate) mod remote;
 mod steps;
-pub mod worker;
+pub(crate) mod worker;
 
 pub use connect::NatsConfig;
 

@@ -7,7 +7,8 @@
 
 use super::DistError;
 use super::connect::{OBJECT_BUCKET, Resources};
-use crate::pipeline::tiled::store::{RemoteStore, StoreError};
+use crate::error::StoreError;
+use crate::pipeline::tiled::store::RemoteStore;
 use async_nats::jetstream::object_store::{self, ObjectStore};
 use std::time::Duration;
 use tokio::io::AsyncReadExt;

@@ -17,7 +17,7 @@ use crate::pipeline::tiled::codec::{decode_region, encode_region};
 use crate::pipeline::tiled::graph::{self, BlockOutcome};
 use crate::pipeline::tiled::prepare::{self, Plan};
 use crate::pipeline::tiled::store::Store;
-use crate::pipeline::tiled::{self, TiledError, TiledOptions};
+use crate::pipeline::tiled::{self, TiledOptions};
 use crate::pipeline::{Execution, PointSource, RunError, RunOutput, plan_execution, run};
 use crate::progress::{Progress, Stage};
 use crate::report::Timings;
@@ -45,7 +45,7 @@ impl From<DistError> for TaskError {
 /// A reconstruction error as the job's error (a stop requested by a DELETE included).
 fn recon_error(e: ReconError) -> TaskError {
     match e {
-        ReconError::Tiled(TiledError::Store(s)) => TaskError::Retry(s.to_string()),
+        ReconError::Store(s) => TaskError::Retry(s.to_string()),
         e => TaskError::Job(ErrorBody {
             code: e.kind().code().into(),
             message: e.to_string(),
@@ -273,7 +273,7 @@ fn start(
 fn run_error(e: RunError) -> TaskError {
     match e {
         RunError::Reconstruct {
-            source: ReconError::Tiled(TiledError::Store(s)),
+            source: ReconError::Store(s),
             ..
         } => TaskError::Retry(s.to_string()),
         e @ (RunError::Read(_) | RunError::Write(_)) if e.kind() == ErrorKind::Internal => {
@@ -362,12 +362,12 @@ fn prepare_graph(
     let t = Instant::now();
     let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
     if est.peak_mib > params.max_memory_mib as f64 {
-        let e = TiledError::OverBudget {
+        let e = ReconError::OutOfCoreOverBudget {
             points: n,
             mib: est.peak_mib,
             budget_mib: params.max_memory_mib,
         };
-        return Err(recon_error(e.into()));
+        return Err(recon_error(e));
     }
     params.validate().map_err(|e| recon_error(e.into()))?;
     let options = TiledOptions {

@@ -111,7 +111,6 @@ pub fn mesh_solid(
         // Modelled solids may hold small pieces on purpose (a bead, a thin ring): sample every
         // tile the solid's bound lets through rather than seed from sign changes only.
         seeding: Seeding::EveryTile,
-        ..Default::default()
     };
     let (mut mesh, stats) = polygonize_in(&field, &unit, &pp, &Everywhere, progress)?;
     if mesh.triangles.is_empty() {

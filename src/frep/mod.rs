@@ -14,9 +14,9 @@
 
 pub mod expr;
 pub mod format;
-pub mod mesh;
+pub(crate) mod mesh;
 pub mod morph;
-pub mod ops;
+pub(crate) mod ops;
 pub mod voxel;
 
 use crate::geometry::{Aabb, Normalization, Point3};

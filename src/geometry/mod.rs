@@ -6,7 +6,7 @@
 
 mod aabb;
 mod normalize;
-pub mod pca;
+pub(crate) mod pca;
 mod surround;
 #[cfg(test)]
 pub(crate) use surround::fibonacci_direction;

@@ -8,6 +8,7 @@ use std::borrow::Cow;
 use std::collections::HashMap;
 
 use crate::geometry::TriMesh;
+use crate::mesh::incidence::ByVertex;
 
 /// `mesh` with every group of vertices whose coordinates are equal after rounding to f32 merged into
 /// the group's first vertex (position rounded to f32, that vertex's normal and colour), triangles remapped and
@@ -190,29 +191,13 @@ fn non_manifold_vertices(triangles: &[[u32; 3]], wanted: &[bool]) -> Vec<bool> {
     let n = wanted.len();
     // Link edges a → b of the wanted vertices (triangle [v, a, b] in its winding order), grouped by
     // vertex.
-    let mut start = vec![0usize; n + 1];
-    let triangles: Vec<&[u32; 3]> = (triangles.iter())
-        .filter(|t| t.iter().all(|&v| (v as usize) < n))
-        .collect();
-    for t in &triangles {
-        for &v in t.iter().filter(|&&v| wanted[v as usize]) {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut link = vec![(0u32, 0u32); start[n]];
-    for t in &triangles {
-        for i in (0..3).filter(|&i| wanted[t[i] as usize]) {
-            let v = t[i] as usize;
-            link[fill[v]] = (t[(i + 1) % 3], t[(i + 2) % 3]);
-            fill[v] += 1;
-        }
-    }
+    let link = ByVertex::build(n, triangles.len(), |ti, i| {
+        let t = &triangles[ti];
+        let inside = t.iter().all(|&v| (v as usize) < n);
+        (inside && wanted[t[i] as usize]).then(|| (t[i], (t[(i + 1) % 3], t[(i + 2) % 3])))
+    });
     (0..n)
-        .map(|v| wanted[v] && !is_disc(&link[start[v]..start[v + 1]]))
+        .map(|v| wanted[v] && !is_disc(link.of(v)))
         .collect()
 }
 

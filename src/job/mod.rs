@@ -5,13 +5,13 @@
 //! [`JobBackend`] ([`remote`]). Nothing here speaks HTTP; the server and the NATS executor both
 //! build on it.
 
-pub mod config;
-pub mod error;
-pub mod manager;
-pub mod model;
-pub mod remote;
-pub mod store;
-pub mod volume;
+pub(crate) mod config;
+pub(crate) mod error;
+pub(crate) mod manager;
+pub(crate) mod model;
+pub(crate) mod remote;
+pub(crate) mod store;
+pub(crate) mod volume;
 
 pub use config::ServerConfig;
 pub use error::ErrorBody;

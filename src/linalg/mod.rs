@@ -24,7 +24,7 @@ pub mod dense;
 mod envelope;
 mod envelope_kernels;
 mod ldl;
-pub mod small;
+pub(crate) mod small;
 mod sparse;
 #[cfg(test)]
 mod test_support;

@@ -8,7 +8,7 @@
 //!
 //! Purely combinatorial (indices only). One pass is `O(F log F)` for `F` triangles.
 
-use super::topology::UnionFind;
+use super::incidence::{UnionFind, vertex_triangles};
 use crate::geometry::TriMesh;
 use rayon::prelude::*;
 
@@ -57,34 +57,14 @@ fn crowded_edges(triangles: &[[u32; 3]]) -> (Vec<bool>, Vec<u32>) {
 /// triangles of every fan but the one kept (see the module doc; `piece[t]` is the size of the
 /// edge-connected piece of triangle `t`).
 fn flag_extra_fans(triangles: &[[u32; 3]], n: usize, piece: &[u32], drop: &mut [bool]) {
-    let mut start = vec![0u32; n + 1];
-    for (ti, t) in triangles.iter().enumerate() {
-        if !drop[ti] {
-            for &v in t {
-                start[v as usize + 1] += 1;
-            }
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut incident = vec![0u32; start[n] as usize];
-    for (ti, t) in triangles.iter().enumerate() {
-        if !drop[ti] {
-            for &v in t {
-                incident[fill[v as usize] as usize] = ti as u32;
-                fill[v as usize] += 1;
-            }
-        }
-    }
+    let incident = vertex_triangles(n, triangles, |t| drop[t]);
     // The vertices' decisions read only their fans (not `drop`): in parallel, then applied.
     let flagged: Vec<u32> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
         .map_init(Vec::new, |group, v| {
             let mut out = Vec::new();
-            let fan = &incident[start[v] as usize..start[v + 1] as usize];
+            let fan = incident.of(v);
             if fan.len() > 1 {
                 fan_groups(triangles, v as u32, fan, group);
                 all_but_one(fan, group, piece, &mut out);

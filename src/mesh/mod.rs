@@ -8,20 +8,21 @@
 //! - [`trim`], [`peel`], [`border`], [`floaters`]: open-scan trimming, peeling the border back to
 //!   the data without changing topology, manifold borders, floater removal by data support.
 
-pub mod border;
-pub mod color;
+pub(crate) mod border;
+pub(crate) mod color;
 pub mod compare;
 mod distance;
 pub mod floaters;
-pub mod handles;
-pub mod lod;
+pub(crate) mod handles;
+pub(crate) mod incidence;
+pub(crate) mod lod;
 pub mod optimize;
-pub mod peel;
+pub(crate) mod peel;
 pub mod simplify;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 pub mod topology;
-pub mod trim;
+pub(crate) mod trim;
 
 pub use color::{ColorMode, vertex_colors};
 pub use compare::{CompareError, CompareParams, CompareReport, Reference, compare};

@@ -10,6 +10,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::incidence::{ByVertex, UnionFind, vertex_triangles};
 use crate::geometry::{Point3, TriMesh, cross, dot, norm};
 
 /// Topological summary of a triangle mesh (the `"mesh"` object of the JSON report).
@@ -54,54 +55,6 @@ impl MeshTopology {
     pub fn genus_label(&self) -> String {
         self.genus
             .map_or_else(|| "-".to_string(), |g| g.to_string())
-    }
-}
-
-/// Disjoint-set forest with path halving and union by size.
-pub(crate) struct UnionFind {
-    parent: Vec<u32>,
-    size: Vec<u32>,
-}
-
-impl UnionFind {
-    pub(crate) fn new(n: usize) -> Self {
-        UnionFind {
-            parent: (0..n as u32).collect(),
-            size: vec![1; n],
-        }
-    }
-
-    /// `n` singletons again, reusing the storage.
-    fn reset(&mut self, n: usize) {
-        self.parent.clear();
-        self.parent.extend(0..n as u32);
-        self.size.clear();
-        self.size.resize(n, 1);
-    }
-
-    pub(crate) fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            let grand = self.parent[self.parent[x as usize] as usize];
-            self.parent[x as usize] = grand;
-            x = grand;
-        }
-        x
-    }
-
-    /// Joins the sets of `a` and `b`; false when they were one already.
-    pub(crate) fn union(&mut self, a: u32, b: u32) -> bool {
-        let (ra, rb) = (self.find(a), self.find(b));
-        if ra == rb {
-            return false;
-        }
-        let (big, small) = if self.size[ra as usize] >= self.size[rb as usize] {
-            (ra, rb)
-        } else {
-            (rb, ra)
-        };
-        self.parent[small as usize] = big;
-        self.size[big as usize] += self.size[small as usize];
-        true
     }
 }
 
@@ -152,36 +105,22 @@ pub fn has_boundary_edge(triangles: &[[u32; 3]]) -> bool {
 }
 
 /// The half-edges of `triangles` bucketed by their lower vertex (a counting sort, `O(F)`): vertex
-/// `v`'s are `values[start[v]..start[v + 1]]`, each `pack(higher vertex, triangle, lower → higher
+/// `v`'s are `of(v)`, each `pack(higher vertex, triangle, lower → higher
 /// is the triangle's direction)`, sorted within the bucket (a vertex has few).
 fn by_lower_vertex(
     triangles: &[[u32; 3]],
     pack: impl Fn(u32, usize, bool) -> u64,
-) -> (Vec<usize>, Vec<u64>) {
+) -> ByVertex<u64> {
     let n = (triangles.iter().flatten()).fold(0, |m, &v| m.max(v as usize + 1));
-    let mut start = vec![0usize; n + 1];
-    for t in triangles {
-        for k in 0..3 {
-            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut values = vec![0u64; start[n]];
-    let mut fill = start.clone();
-    for (ti, t) in triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let lo = a.min(b) as usize;
-            values[fill[lo]] = pack(a.max(b), ti, a <= b);
-            fill[lo] += 1;
-        }
-    }
+    let mut by = ByVertex::build(n, triangles.len(), |ti, k| {
+        let t = &triangles[ti];
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        Some((a.min(b), pack(a.max(b), ti, a <= b)))
+    });
     for v in 0..n {
-        values[start[v]..start[v + 1]].sort_unstable();
+        by.of_mut(v).sort_unstable();
     }
-    (start, values)
+    by
 }
 
 /// Groups the half-edges of all triangles by undirected edge, sorted by `(lo, hi)`
@@ -189,12 +128,12 @@ fn by_lower_vertex(
 /// time).
 pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
     // The higher vertex and the direction of each half-edge, packed `hi << 1 | forward`.
-    let (start, upper) = by_lower_vertex(triangles, |hi, _, forward| {
+    let upper = by_lower_vertex(triangles, |hi, _, forward| {
         (u64::from(hi) << 1) | forward as u64
     });
     let mut edges: Vec<EdgeUse> = Vec::with_capacity(upper.len() / 2 + 1);
-    for lo in 0..start.len() - 1 {
-        for &x in &upper[start[lo]..start[lo + 1]] {
+    for lo in 0..upper.vertices() {
+        for &x in upper.of(lo) {
             let (hi, forward) = ((x >> 1) as u32, x & 1 == 1);
             match edges.last_mut() {
                 Some(e) if e.lo == lo as u32 && e.hi == hi => {
@@ -220,13 +159,11 @@ pub(crate) fn collect_edges(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
 /// using it), sorted: the order of a comparison sort of those pairs ([`by_lower_vertex`]).
 pub(crate) fn sorted_half_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
     // The higher vertex and the triangle of each half-edge, packed `hi << 32 | triangle`.
-    let (start, upper) = by_lower_vertex(triangles, |hi, ti, _| (u64::from(hi) << 32) | ti as u64);
+    let upper = by_lower_vertex(triangles, |hi, ti, _| (u64::from(hi) << 32) | ti as u64);
     let mut half = Vec::with_capacity(upper.len());
-    for lo in 0..start.len() - 1 {
+    for lo in 0..upper.vertices() {
         half.extend(
-            upper[start[lo]..start[lo + 1]]
-                .iter()
-                .map(|&x| (((lo as u64) << 32) | (x >> 32), x as u32)),
+            (upper.of(lo).iter()).map(|&x| (((lo as u64) << 32) | (x >> 32), x as u32)),
         );
     }
     half
@@ -234,30 +171,14 @@ pub(crate) fn sorted_half_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
 
 /// Number of vertices whose incident triangles do not form a single edge-connected fan.
 fn count_non_manifold_vertices(triangles: &[[u32; 3]], n: usize) -> usize {
-    let mut start = vec![0u32; n + 1];
-    for t in triangles {
-        for &v in t {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut incident = vec![0u32; start[n] as usize];
-    for (ti, t) in triangles.iter().enumerate() {
-        for &v in t {
-            incident[fill[v as usize] as usize] = ti as u32;
-            fill[v as usize] += 1;
-        }
-    }
+    let incident = vertex_triangles(n, triangles, |_| false);
     // Vertices in parallel, each thread with its own scratch (the fans are independent).
     let scratch = || (Vec::<(u32, u32)>::new(), UnionFind::new(0));
     (0..n)
         .into_par_iter()
         .with_min_len(4096)
         .map_init(scratch, |(spokes, uf), v| {
-            let fan = &incident[start[v] as usize..start[v + 1] as usize];
+            let fan = incident.of(v);
             if fan.len() <= 1 {
                 return 0;
             }

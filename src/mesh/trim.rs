@@ -23,7 +23,7 @@ pub fn unsupported_triangles(mesh: &TriMesh, points: &[Point3], max_distance: f6
 pub fn keep_enclosed_holes(mesh: &TriMesh, drop: &mut [bool]) -> usize {
     let t = mesh.triangles.len();
     let half = super::topology::sorted_half_edges(&mesh.triangles);
-    let mut uf = super::topology::UnionFind::new(t);
+    let mut uf = super::incidence::UnionFind::new(t);
     // Per region root (after all unions): touches a border / touches a kept triangle.
     let mut pairs: Vec<(u32, u32)> = Vec::new();
     let mut border: Vec<u32> = Vec::new();

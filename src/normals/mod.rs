@@ -15,7 +15,6 @@ mod orient;
 mod parity;
 mod patches;
 mod regions;
-mod signed_sets;
 #[cfg(test)]
 mod tests;
 

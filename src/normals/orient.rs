@@ -28,7 +28,7 @@ use super::graph::riemannian_edges;
 use super::parity::parity_flips;
 use super::patches::{Patches, components, grow_patches};
 use super::regions::inward_regions;
-use super::signed_sets::SignedSets;
+use crate::mesh::incidence::SignedSets;
 use crate::geometry::{Point3, dot, sub};
 
 /// Edges at least this confident join points into one patch: the mirrored normal within 15° of

@@ -8,7 +8,7 @@
 //! is oriented without walking it. `O(E α(n))` after the edges are sorted.
 
 use super::graph::Edge;
-use super::signed_sets::SignedSets;
+use crate::mesh::incidence::SignedSets;
 use crate::geometry::Point3;
 
 /// A partition of the points into patches, each internally consistently oriented.

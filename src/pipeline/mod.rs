@@ -140,12 +140,11 @@ pub fn plan_execution(points: u64, params: &ReconParams) -> Result<Execution, Re
     }
     let est = tiled::estimate(points, budget, rayon::current_num_threads());
     if est.peak_mib > budget as f64 {
-        return Err(tiled::TiledError::OverBudget {
+        return Err(ReconError::OutOfCoreOverBudget {
             points,
             mib: est.peak_mib,
             budget_mib: budget,
-        }
-        .into());
+        });
     }
     Ok(Execution::OutOfCore(est))
 }

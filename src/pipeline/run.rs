@@ -118,16 +118,16 @@ fn out_of_core(
     output: &RunOutput<'_>,
     progress: &dyn Progress,
 ) -> Result<super::Reconstruction, RunError> {
-    use super::tiled::{TiledError, TiledInput, TiledOptions, reconstruct_tiled_from};
+    use super::tiled::{TiledInput, TiledOptions, reconstruct_tiled_from};
     let recon_err = |e: ReconError| match e {
-        ReconError::Tiled(TiledError::Read(io)) => RunError::Read(io),
+        ReconError::Read(io) => RunError::Read(io),
         e => RunError::Reconstruct {
             input: source.name(),
             source: e,
         },
     };
     if output.field.is_some() {
-        return Err(recon_err(TiledError::Unsupported("--save-field").into()));
+        return Err(recon_err(ReconError::OutOfCoreUnsupported("--save-field")));
     }
     let input = match source {
         PointSource::File(path) => StreamInput::File(path),
@@ -160,7 +160,8 @@ pub fn run(
         return Err(recon_err(ReconError::Params(crate::params::ParamError {
             name: "method",
             value: params.method.name().to_string(),
-            expected: "csrbf when saving the field (--save-field): the global methods have no saved form",
+            expected: "csrbf when saving the field (--save-field): the global methods have no saved form"
+                .into(),
         })));
     }
     let cloud = match source {

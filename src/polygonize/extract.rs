@@ -92,11 +92,6 @@ pub fn polygonize_in(
     region: &dyn Region,
     progress: &dyn Progress,
 ) -> Result<(TriMesh, PolygonizeStats), PolygonizeError> {
-    if let super::Extraction::Adaptive { tolerance } = params.extraction {
-        return super::adaptive::polygonize_adaptive(
-            field, domain, params, tolerance, region, progress,
-        );
-    }
     let grid = Grid::new(domain, params)?;
     let table = case_table();
     let blocks_total = grid.block_count();
@@ -182,7 +177,7 @@ fn demanded_blocks(
 
 /// Multiplicative hasher for the (already well-spread) edge ids.
 #[derive(Default)]
-pub(super) struct EdgeIdHasher(u64);
+struct EdgeIdHasher(u64);
 
 impl Hasher for EdgeIdHasher {
     fn finish(&self) -> u64 {

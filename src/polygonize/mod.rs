@@ -102,9 +102,7 @@ impl Region for Everywhere {
     }
 }
 
-mod adaptive;
 mod band;
-
 mod block;
 mod extract;
 mod grid;
@@ -112,8 +110,7 @@ mod kuhn;
 pub mod marching_squares;
 mod params;
 mod refine;
-mod tets;
 
 pub use band::DataBand;
 pub use extract::{polygonize, polygonize_in};
-pub use params::{Extraction, PolygonizeError, PolygonizeParams, PolygonizeStats, Seeding};
+pub use params::{PolygonizeError, PolygonizeParams, PolygonizeStats, Seeding};

@@ -16,31 +16,6 @@ pub struct PolygonizeParams {
     pub refine_steps: usize,
     /// Which tiles the zero set is followed from (default [`Seeding::SignChange`]).
     pub seeding: Seeding,
-    /// The grid the zero set is extracted on (default [`Extraction::Uniform`]).
-    pub extraction: Extraction,
-}
-
-/// The grid the polygonizer extracts the zero set on.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Extraction {
-    /// Every cell of the grid near the surface, marching tetrahedra on the Kuhn split: the
-    /// same mesh whatever the skip test says (see [`super::polygonize_in`]).
-    #[default]
-    Uniform,
-    /// Cubes of two grid cells where the field is close to linear, split into the grid's cells
-    /// where it bends (two-level conforming tetrahedra, see `adaptive/mod.rs`). On fields fitted
-    /// to real scans it evaluates 34–52 % fewer field values and makes 12–36 % fewer triangles
-    /// than [`Extraction::Uniform`], but today it takes 1.1–1.6 times as long (its bookkeeping
-    /// costs more than the values it saves, `examples/extraction.rs`), so the pipeline does
-    /// not use it; the small handles of the raw zero set can differ from the uniform grid's
-    /// (a different tetrahedralization). `tolerance` (normalised units) is the
-    /// largest error of the first-order prediction from a corner of an unsplit cube to its
-    /// centre, in distance (`|Δf| / |∇f|`); the [`Seeding`] does not apply (the seeds are
-    /// probed on tiles of 4 cells).
-    Adaptive {
-        /// Largest prediction error of an unsplit cube, normalised units.
-        tolerance: f64,
-    },
 }
 
 impl Default for PolygonizeParams {
@@ -50,7 +25,6 @@ impl Default for PolygonizeParams {
             max_cells: 1 << 32,
             refine_steps: 2,
             seeding: Seeding::SignChange,
-            extraction: Extraction::Uniform,
         }
     }
 }

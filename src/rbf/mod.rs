@@ -3,16 +3,16 @@
 //! `f(x) = g(x) + Σ_i λ_i φ(|x − P_i| / R) [+ v₀ + v·x]`, with `g` the carrier (negative inside) and
 //! `λ` solving `A λ = −g(P)` (plus the polynomial border when asked), so `f(P_i) = 0`.
 
-pub mod assemble;
+pub(crate) mod assemble;
 pub mod carrier;
-pub mod field;
-pub mod kernel;
-pub mod levels;
-pub mod noise;
-pub mod pou;
+pub(crate) mod field;
+pub(crate) mod kernel;
+pub(crate) mod levels;
+pub(crate) mod noise;
+pub(crate) mod pou;
 mod region;
-pub mod support;
-pub mod winding;
+pub(crate) mod support;
+pub(crate) mod winding;
 
 pub use assemble::assemble_matrix;
 pub use carrier::{Carrier, CarrierError, CarrierKind, CarrierParams, LocalFit, fit_carrier};

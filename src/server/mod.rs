@@ -6,8 +6,8 @@
 //! The server only calls the library (`io`, `params`, `reconstruct`); it adds no numerics.
 //! Design: the HTTP API section of the design notes; the seed's online server with browser view.
 
-pub mod error;
-pub mod feasibility;
+pub(crate) mod error;
+pub(crate) mod feasibility;
 #[cfg(feature = "nats")]
 pub mod nats;
 pub mod openapi;

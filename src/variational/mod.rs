@@ -12,19 +12,19 @@
 //! longest edge 1) and evaluates in the caller's units. Sign convention: `f < 0` inside.
 
 pub mod adaptive;
-pub mod batch;
-pub mod constraints;
+pub(crate) mod batch;
+pub(crate) mod constraints;
 pub mod curve_io;
 pub mod datasets;
-pub mod editing;
-pub mod field3d;
-pub mod incremental;
-pub mod kernel;
+pub(crate) mod editing;
+pub(crate) mod field3d;
+pub(crate) mod incremental;
+pub(crate) mod kernel;
 pub mod mlp;
-pub mod mls;
-pub mod quality;
-pub mod svg;
-pub mod turk_obrien;
+pub(crate) mod mls;
+pub(crate) mod quality;
+pub(crate) mod svg;
+pub(crate) mod turk_obrien;
 pub mod workbench;
 
 pub use constraints::{

@@ -6,7 +6,7 @@ use std::collections::{BinaryHeap, HashMap, HashSet};
 
 use super::{Adjacency, Loop};
 use crate::geometry::{TriMesh, dist2};
-use crate::mesh::topology::UnionFind;
+use crate::mesh::incidence::UnionFind;
 
 /// Per-thread buffers of the geodesic balls.
 pub(super) struct Ball {

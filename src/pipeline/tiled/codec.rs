@@ -6,7 +6,8 @@
 
 use super::graph::{BlockOutcome, RegionOutcome};
 use super::prepare::{BlockBox, CarrierPlan, Plan};
-use super::store::{PointSet, StoreError};
+use super::store::PointSet;
+use crate::error::StoreError;
 use super::tasks::{CellRange, GridPlan};
 use crate::clean::CleanStats;
 use crate::geometry::{Aabb, Normalization, Point3};

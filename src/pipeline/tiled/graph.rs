@@ -2,7 +2,6 @@
 //! The local executor ([`super::reconstruct_tiled`]) and the distributed one (`crate::dist`) call
 //! the same functions, so both give the same mesh; each step reads keyed values and writes one.
 
-use super::TiledError;
 use super::prepare::Plan;
 use super::store::{self, PointSet, SplineData, Store};
 use super::tasks::{self, Quiet, block_key, piece_key, spline_key};
@@ -49,13 +48,13 @@ pub(crate) fn fit_step(
 ) -> Result<BlockOutcome, ReconError> {
     let t = Instant::now();
     let key = block_key(b);
-    let set = PointSet::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-        .map_err(TiledError::from)?;
+    let set = PointSet::decode(&store.get(&key)?, &key)
+        ?;
     let fitted = tasks::fit_block(plan, b, &set, &Quiet(progress))?;
     drop(set);
     store
         .put(&spline_key(b), fitted.spline.encode())
-        .map_err(TiledError::from)?;
+        ?;
     Ok(BlockOutcome {
         report: BlockReport {
             id: b,
@@ -84,7 +83,7 @@ pub(crate) fn region_step(
     let piece = tasks::polygonize_region(plan, r, &set, splines, &Quiet(progress))?;
     store
         .put(&piece_key(r), store::encode_piece(&piece.mesh))
-        .map_err(TiledError::from)?;
+        ?;
     let (sum2, max, count) = piece.residual;
     Ok(Some(RegionOutcome {
         stats: piece.stats,
@@ -120,8 +119,8 @@ pub(crate) fn weld_step(
         max = max.max(o.max);
         count += o.count;
         let key = piece_key(r);
-        let piece = store::decode_piece(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
+        let piece = store::decode_piece(&store.get(&key)?, &key)
+            ?;
         store.remove(&key);
         super::merge::append_piece(&mut mesh, &mut seen, piece, r, &plan.grid.region_box(r));
     }
@@ -164,8 +163,8 @@ fn region_points(plan: &Plan, store: &Store, r: usize) -> Result<PointSet, Recon
             continue;
         }
         let key = block_key(b);
-        let set = PointSet::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
+        let set = PointSet::decode(&store.get(&key)?, &key)
+            ?;
         for (k, p) in set.points.iter().enumerate() {
             if reach.contains(p) {
                 rows.push((set.ids[k], *p, set.normals.as_ref().map(|n| n[k])));
@@ -195,8 +194,8 @@ fn region_splines(
             continue;
         }
         let key = spline_key(b);
-        let data = SplineData::decode(&store.get(&key).map_err(TiledError::from)?, &key)
-            .map_err(TiledError::from)?;
+        let data = SplineData::decode(&store.get(&key)?, &key)
+            ?;
         if !data.levels.is_empty() {
             out.push((b, tasks::spline_from_data(data, &plan.params)?));
         }

@@ -31,14 +31,14 @@ pub(crate) mod graph;
 mod merge;
 pub(crate) mod prepare;
 mod route;
-pub mod store;
+pub(crate) mod store;
 mod survey;
 mod tasks;
 
-pub use store::{StoreError, StoreKind};
+pub use store::StoreKind;
 pub use survey::TiledInput;
 
-use crate::error::{ErrorKind, ReconError};
+use crate::error::{ReconError, StoreError};
 use crate::geometry::{PointCloud, TriMesh};
 use crate::params::ReconParams;
 use crate::progress::{Progress, Stage};
@@ -51,76 +51,6 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 use store::Store;
-
-/// Why the task graph refused or failed.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum TiledError {
-    /// The local carrier needs normals and the input has none.
-    #[error(
-        "out-of-core reconstruction with the local carrier needs oriented normals in the input \
-         (estimating them needs the whole cloud in memory); give points with normals, use \
-         --carrier ellipsoid or sphere, or raise --max-memory-mib"
-    )]
-    NeedsNormals,
-    /// The normals disagree between neighbours.
-    #[error(
-        "{:.0}% of neighbouring normals point in opposite directions; out-of-core reconstruction \
-         cannot reorient them (that needs the whole cloud): orient the normals or raise --max-memory-mib",
-        share * 100.0
-    )]
-    InconsistentNormals {
-        /// Share of opposed neighbour pairs.
-        share: f64,
-    },
-    /// An option the task graph does not implement.
-    #[error(
-        "{0} is not available for out-of-core reconstruction (the cloud is over the memory budget); \
-         leave it out or raise --max-memory-mib"
-    )]
-    Unsupported(&'static str),
-    /// Even out of core the reconstruction does not fit the budget.
-    #[error(
-        "{points} points need about {mib:.0} MiB even out of core (the subsample, the partition's \
-         buffers and the smallest block's system), more than the memory budget of {budget_mib} MiB; \
-         raise --max-memory-mib"
-    )]
-    OverBudget {
-        /// Points in the input.
-        points: u64,
-        /// Estimated out-of-core peak, MiB.
-        mib: f64,
-        /// The budget, MiB.
-        budget_mib: u64,
-    },
-    /// The store of intermediate results failed.
-    #[error(transparent)]
-    Store(#[from] StoreError),
-    /// Streaming the input failed (the readers' own error).
-    #[error(transparent)]
-    Read(crate::io::IoError),
-    /// More finite points than the 32-bit point ids number.
-    #[error(
-        "more than 4294967295 finite points: out-of-core reconstruction numbers points with 32-bit \
-         ids; split the scan"
-    )]
-    TooManyIds,
-}
-
-impl TiledError {
-    /// Whose failure this is.
-    pub fn kind(&self) -> ErrorKind {
-        match self {
-            TiledError::NeedsNormals | TiledError::InconsistentNormals { .. } => {
-                ErrorKind::Unreconstructable
-            }
-            TiledError::Unsupported(_) => ErrorKind::BadParameter,
-            TiledError::OverBudget { .. } | TiledError::TooManyIds => ErrorKind::OverBudget,
-            TiledError::Store(_) => ErrorKind::Internal,
-            TiledError::Read(e) => e.kind(),
-        }
-    }
-}
 
 /// How the local executor runs the task graph.
 #[derive(Debug, Clone, PartialEq)]
@@ -264,12 +194,11 @@ pub fn reconstruct_tiled_from(
         .unwrap_or_else(rayon::current_num_threads);
     let est = estimate(n.unwrap_or(0), params.max_memory_mib, threads);
     if let Some(n) = n.filter(|_| est.peak_mib > params.max_memory_mib as f64) {
-        return Err(TiledError::OverBudget {
+        return Err(ReconError::OutOfCoreOverBudget {
             points: n,
             mib: est.peak_mib,
             budget_mib: params.max_memory_mib,
-        }
-        .into());
+        });
     }
     let block_points = options.block_points.unwrap_or(est.block_points);
     let concurrency = options.concurrency.unwrap_or(est.concurrency).max(1);
@@ -277,12 +206,12 @@ pub fn reconstruct_tiled_from(
         .num_threads(concurrency)
         .build()
         .map_err(|e| {
-            TiledError::Store(StoreError::Io {
+            ReconError::Store(StoreError::Io {
                 path: "rayon pool".into(),
                 source: std::io::Error::other(e.to_string()),
             })
         })?;
-    let store = Store::open(&options.store).map_err(TiledError::from)?;
+    let store = Store::open(&options.store)?;
     let mut timings = Timings::default();
     let t = Instant::now();
     let plan =

@@ -27,9 +27,9 @@ use super::route;
 use super::store::Store;
 use super::survey::{self, Survey, TiledInput};
 use super::tasks::{GridPlan, block_key};
-use super::{TiledError, TiledOptions};
+use super::TiledOptions;
 use crate::clean::{CleanStats, check_degenerate};
-use crate::error::ReconError;
+use crate::error::{ReconError, StoreError};
 use crate::geometry::{Aabb, Normalization, Point3};
 use crate::params::{Boundary, ReconParams};
 use crate::progress::{Progress, Stage};
@@ -110,15 +110,15 @@ pub(crate) struct Plan {
 }
 
 /// Refuse what the task graph cannot do before any work.
-pub(crate) fn check_supported(params: &ReconParams) -> Result<(), TiledError> {
+pub(crate) fn check_supported(params: &ReconParams) -> Result<(), ReconError> {
     if params.method != crate::params::Method::Csrbf {
-        return Err(TiledError::Unsupported("--method other than csrbf"));
+        return Err(ReconError::OutOfCoreUnsupported("--method other than csrbf"));
     }
     if params.boundary == Boundary::Trim {
-        return Err(TiledError::Unsupported("--boundary trim"));
+        return Err(ReconError::OutOfCoreUnsupported("--boundary trim"));
     }
     if params.outliers.is_some() {
-        return Err(TiledError::Unsupported("--outliers"));
+        return Err(ReconError::OutOfCoreUnsupported("--outliers"));
     }
     Ok(())
 }
@@ -135,7 +135,7 @@ fn plan_carrier(
     let kind = match (params.carrier.kind, &normals) {
         (CarrierKind::Auto | CarrierKind::Local, Some(_)) => CarrierKind::Local,
         (CarrierKind::Auto | CarrierKind::Local, None) => {
-            return Err(TiledError::NeedsNormals.into());
+            return Err(ReconError::NeedsNormals);
         }
         (k, _) => k,
     };
@@ -163,7 +163,7 @@ fn plan_carrier(
             _ => unreachable!("fit_ellipsoid returns an ellipsoid"),
         },
         _ => {
-            let normals = normals.ok_or(TiledError::NeedsNormals)?;
+            let normals = normals.ok_or(ReconError::NeedsNormals)?;
             let mut grid = crate::rbf::carrier::build_winding_grid(points, normals, radius);
             let inward = grid.as_ref().is_some_and(|w| {
                 let (sum, abs) = w.sums();
@@ -184,10 +184,10 @@ fn plan_carrier(
 }
 
 /// The carrier the input allows: the local carrier (the default) needs normals.
-fn carrier_kind(params: &ReconParams, has_normals: bool) -> Result<CarrierKind, TiledError> {
+fn carrier_kind(params: &ReconParams, has_normals: bool) -> Result<CarrierKind, ReconError> {
     match (params.carrier.kind, has_normals) {
         (CarrierKind::Auto | CarrierKind::Local, true) => Ok(CarrierKind::Local),
-        (CarrierKind::Auto | CarrierKind::Local, false) => Err(TiledError::NeedsNormals),
+        (CarrierKind::Auto | CarrierKind::Local, false) => Err(ReconError::NeedsNormals),
         (k, _) => Ok(k),
     }
 }
@@ -250,11 +250,10 @@ fn spill_dir(options: &TiledOptions) -> Result<tempfile::TempDir, ReconError> {
     (tempfile::Builder::new().prefix("rbfsurf-spill-"))
         .tempdir_in(&parent)
         .map_err(|source| {
-            TiledError::Store(super::StoreError::Io {
+            ReconError::Store(StoreError::Io {
                 path: parent,
                 source,
             })
-            .into()
         })
 }
 
@@ -314,7 +313,7 @@ fn estimate_on_patches(
         let ns: Vec<Point3> = kept.iter().map(|r| r.n).collect();
         let share = crate::normals::inconsistent_fraction(&points, &ns, 8, knn);
         if share > INCONSISTENT_NORMALS {
-            return Err(TiledError::InconsistentNormals { share }.into());
+            return Err(ReconError::InconsistentNormals { share });
         }
     }
     let core: Vec<Point3> = (points.iter())
@@ -544,8 +543,7 @@ fn write_blocks(
                 let _ = std::fs::remove_file(&path);
                 let members = set.points.iter().filter(|p| outer.contains(p)).count();
                 store
-                    .put(&block_key(b), set.encode())
-                    .map_err(TiledError::from)?;
+                    .put(&block_key(b), set.encode())?;
                 Ok((
                     BlockBox {
                         core,

@@ -9,10 +9,9 @@
 //! the margin covers the block's reach plus the tolerance — so every block that holds a point
 //! makes the same keep/drop decision for it.
 
-use super::TiledError;
-use super::store::{PointSet, StoreError};
+use super::store::PointSet;
 use super::survey::{TiledInput, finite, unit_normal};
-use crate::error::ReconError;
+use crate::error::{ReconError, StoreError};
 use crate::geometry::{Aabb, Normalization, Point3};
 use crate::spatial::{IndexKind, build_index};
 use std::io::Write;
@@ -39,11 +38,10 @@ fn record_bytes(normals: bool) -> usize {
 }
 
 fn io_err(path: &Path, source: std::io::Error) -> ReconError {
-    TiledError::Store(StoreError::Io {
+    ReconError::Store(StoreError::Io {
         path: path.to_path_buf(),
         source,
     })
-    .into()
 }
 
 /// The spill file of provisional block `b` in `dir`.
@@ -199,11 +197,10 @@ pub(crate) fn read_spill(path: &Path, normals: bool) -> Result<Vec<Record>, Reco
     };
     let size = record_bytes(normals);
     if bytes.len() % size != 0 {
-        return Err(TiledError::Store(StoreError::Corrupt {
+        return Err(ReconError::Store(StoreError::Corrupt {
             key: path.display().to_string(),
             what: "spill file of partial records",
-        })
-        .into());
+        }));
     }
     let f = |c: &[u8], k: usize| {
         f64::from_le_bytes(c[4 + 8 * k..12 + 8 * k].try_into().unwrap_or([0; 8]))

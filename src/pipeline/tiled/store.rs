@@ -6,6 +6,7 @@
 //! and flat arrays of f64 / u32. Keys are `"points/{block}"`, `"spline/{block}"`,
 //! `"piece/{region}"`: a rewritten key replaces the value (a task run twice writes the same bytes).
 
+use crate::error::StoreError;
 use crate::geometry::{Point3, TriMesh};
 use std::collections::HashMap;
 use std::io::Write;
@@ -21,30 +22,6 @@ pub enum StoreKind {
     /// Files in a fresh temporary directory, under this directory (`None`: the system's
     /// temporary directory, `TMPDIR`); removed when the run ends.
     TempDir(Option<PathBuf>),
-}
-
-/// Why the store failed.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum StoreError {
-    /// A temporary file could not be created, written or read.
-    #[error(
-        "out-of-core store {path}: {source}; free disk space there or set TMPDIR to a larger disk"
-    )]
-    Io {
-        /// The file or directory.
-        path: PathBuf,
-        /// The system's error.
-        source: std::io::Error,
-    },
-    /// A stored value is missing or does not decode (a bug or a damaged file).
-    #[error("out-of-core store: {key} is missing or damaged ({what})")]
-    Corrupt {
-        /// The key.
-        key: String,
-        /// What was wrong.
-        what: &'static str,
-    },
 }
 
 /// A store kept outside this process (the distributed executor's object store), reached

@@ -8,7 +8,6 @@
 //! [`super::prepare::SAMPLE_POINTS`] would be kept: at most that many points, spread over the
 //! whole file, the same for every run over the same input.
 
-use super::TiledError;
 use crate::error::ReconError;
 use crate::geometry::{Aabb, Point3, PointCloud, normalized};
 use crate::io::{ReadLimits, StreamInput};
@@ -33,7 +32,7 @@ pub(crate) type ChunkFn<'f> =
 
 impl TiledInput<'_> {
     /// Calls `f` with consecutive chunks of the points (and normals when the input has them),
-    /// in input order; stops at the first error (a read error becomes [`TiledError::Read`]).
+    /// in input order; stops at the first error (a read error becomes [`ReconError::Read`]).
     pub(crate) fn for_each_chunk(&self, f: &mut ChunkFn<'_>) -> Result<(), ReconError> {
         match self {
             TiledInput::Cloud(cloud) => {
@@ -50,7 +49,7 @@ impl TiledInput<'_> {
             TiledInput::Stream(input, limits) => {
                 crate::io::stream_points(*input, limits, CHUNK_POINTS, |chunks| {
                     for chunk in chunks {
-                        let c = chunk.map_err(TiledError::Read)?;
+                        let c = chunk.map_err(ReconError::Read)?;
                         f(&c.points, c.normals.as_deref())?;
                     }
                     Ok(())
@@ -130,7 +129,7 @@ pub(crate) fn survey(input: &TiledInput<'_>, max_sample: usize) -> Result<Survey
             if !finite(p) {
                 continue;
             }
-            let id = u32::try_from(s.finite).map_err(|_| TiledError::TooManyIds)?;
+            let id = u32::try_from(s.finite).map_err(|_| ReconError::TooManyIds)?;
             s.finite += 1;
             s.bbox.grow(p);
             let n = normals.map_or([0.0; 3], |n| unit_normal(n[i]));

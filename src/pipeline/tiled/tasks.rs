@@ -9,7 +9,6 @@
 //! grid corner, and the vertex on a grid edge, are then bit for bit the same on both sides of a
 //! seam, and [`super::merge`] welds the pieces by position.
 
-use super::TiledError;
 use super::prepare::{CarrierPlan, Plan};
 use super::store::{LevelData, PointSet, SplineData};
 use crate::error::ReconError;
@@ -228,7 +227,7 @@ fn build_carrier(
             semi_axes: *semi_axes,
         },
         CarrierPlan::Local { winding } => {
-            let normals = set.normals.clone().ok_or(TiledError::NeedsNormals)?;
+            let normals = set.normals.clone().ok_or(ReconError::NeedsNormals)?;
             let local = LocalCarrier::with_winding(
                 set.points.clone(),
                 normals,
@@ -237,7 +236,7 @@ fn build_carrier(
                 winding.clone(),
                 plan.params.carrier.fit,
             )
-            .ok_or(TiledError::NeedsNormals)?;
+            .ok_or(ReconError::NeedsNormals)?;
             Carrier::Local(local)
         }
     })

@@ -3,10 +3,10 @@
 //! before any file-system access) and the query-string → [`ReconOptions`] mapping (the command
 //! line's names and validation, via serde).
 
-pub mod meta;
+pub(crate) mod meta;
 pub mod reconstructions;
-pub mod upload;
-pub mod volume;
+pub(crate) mod upload;
+pub(crate) mod volume;
 
 use super::error::ApiError;
 use crate::job::{Job, JobView, ServerConfig};

@@ -13,8 +13,8 @@
 //! Cost: `O(epochs · (N + P) · W)` training for `W` ≈ 1.2k weights (see [`train`]), then
 //! `O(W)` per field evaluation. Second derivatives are exact (forward-mode jets, [`net`]).
 
-pub mod net;
-pub mod train;
+pub(crate) mod net;
+pub(crate) mod train;
 
 use std::time::Instant;
 
