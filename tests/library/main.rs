@@ -3,6 +3,7 @@
 //! One test binary, so the crate is linked once (`cargo test --test library`).
 
 mod adaptive;
+mod colour;
 #[path = "../common/mod.rs"]
 mod common;
 mod frep;
