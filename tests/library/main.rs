@@ -2,6 +2,7 @@
 //! against analytic truth and the shipped data, the large-scan machinery, the parser soak.
 //! One test binary, so the crate is linked once (`cargo test --test library`).
 
+mod colour;
 #[path = "../common/mod.rs"]
 mod common;
 mod docs_links;
