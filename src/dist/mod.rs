@@ -23,13 +23,16 @@
 pub mod connect;
 mod objects;
 mod outcome;
+pub mod presence;
 mod queue;
 mod records;
 pub mod remote;
+mod spread;
 mod steps;
 pub mod worker;
 
 pub use connect::NatsConfig;
+pub use spread::SPREAD_POINTS;
 
 /// What went wrong talking to NATS or running a task.
 #[derive(Debug, thiserror::Error)]
