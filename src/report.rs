@@ -29,6 +29,63 @@ pub struct Report {
     /// how many points, how long and at what memory. Absent for in-memory runs.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub blocks: Vec<BlockReport>,
+    /// Every task of a distributed task-graph run in the order they ended: which worker ran it,
+    /// when, for how long. Absent for other runs.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tasks: Vec<TaskReport>,
+    /// The longest chain of dependent tasks of `tasks[]` ([`critical_path`]). Absent for other
+    /// runs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub critical_path: Option<CriticalPath>,
+}
+
+/// One task of a distributed task-graph run (report `tasks[]`).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct TaskReport {
+    /// `prepare` (the `start` task that planned the graph), `block <b>`, `region <r>` or `merge`.
+    pub task: String,
+    /// Id of the worker that ran it (the last delivery's, when it ran more than once).
+    pub worker: String,
+    /// Unix milliseconds when the task began on its worker.
+    pub start_ms: u64,
+    /// Unix milliseconds when its result was stored.
+    pub end_ms: u64,
+    /// Wall-clock seconds, `end_ms - start_ms`.
+    pub seconds: f64,
+}
+
+/// The longest chain of dependent tasks of a task-graph run: prepare, then the slowest block
+/// (every region waits for every block), the slowest region, then merge.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CriticalPath {
+    /// The chain's tasks, in order.
+    pub tasks: Vec<String>,
+    /// Sum of their wall-clock seconds: the job's time on unlimited idle workers.
+    pub seconds: f64,
+    /// Seconds from the first task's start to the last task's end (what the job took).
+    pub wall_seconds: f64,
+}
+
+/// The critical path of `tasks` (see [`CriticalPath`]); `None` without tasks. A phase with no
+/// task (no region touched the surface) adds nothing.
+pub fn critical_path(tasks: &[TaskReport]) -> Option<CriticalPath> {
+    let first = tasks.iter().map(|t| t.start_ms).min()?;
+    let last = tasks.iter().map(|t| t.end_ms).max()?;
+    let slowest = |prefix: &str| {
+        tasks
+            .iter()
+            .filter(|t| t.task == prefix || t.task.starts_with(&format!("{prefix} ")))
+            .max_by(|a, b| a.seconds.total_cmp(&b.seconds))
+    };
+    let chain: Vec<&TaskReport> = ["prepare", "block", "region", "merge"]
+        .into_iter()
+        .filter_map(slowest)
+        .collect();
+    Some(CriticalPath {
+        tasks: chain.iter().map(|t| t.task.clone()).collect(),
+        seconds: chain.iter().map(|t| t.seconds).sum(),
+        wall_seconds: last.saturating_sub(first) as f64 / 1000.0,
+    })
 }
 
 /// One block of a task-graph run (report `blocks[]`).
@@ -347,4 +404,37 @@ fn proc_status_kib(key: &str) -> Option<u64> {
                 .and_then(|l| l.split_whitespace().nth(1))
                 .and_then(|kb| kb.parse::<u64>().ok())
         })
+}
+
+#[cfg(test)]
+mod critical_path_tests {
+    use super::*;
+
+    fn task(task: &str, start_ms: u64, end_ms: u64) -> TaskReport {
+        TaskReport {
+            task: task.into(),
+            worker: "w".into(),
+            start_ms,
+            end_ms,
+            seconds: (end_ms - start_ms) as f64 / 1000.0,
+        }
+    }
+
+    #[test]
+    fn the_critical_path_is_prepare_the_slowest_block_and_region_then_merge() {
+        let tasks = [
+            task("prepare", 1_000, 3_000),
+            task("block 0", 3_100, 4_100),
+            task("block 1", 3_100, 6_100),
+            task("block 10", 4_200, 5_200),
+            task("region 0", 6_200, 6_700),
+            task("region 1", 6_200, 7_200),
+            task("merge", 7_300, 7_800),
+        ];
+        let c = critical_path(&tasks).unwrap();
+        assert_eq!(c.tasks, ["prepare", "block 1", "region 1", "merge"]);
+        assert!((c.seconds - 6.5).abs() < 1e-12, "{c:?}");
+        assert!((c.wall_seconds - 6.8).abs() < 1e-12, "{c:?}");
+        assert!(critical_path(&[]).is_none());
+    }
 }

@@ -29,6 +29,11 @@ pub struct ReconstructArgs {
     /// Refuse inputs with more points than this (default 50,000,000).
     #[arg(long)]
     pub max_points: Option<usize>,
+    /// Run the out-of-core task graph even when the cloud fits the memory budget (the plan a
+    /// cloud over the budget gets; what `rbfsurf worker` makes of a job it splits over idle
+    /// workers, docs/distributed.md).
+    #[arg(long)]
+    pub out_of_core: bool,
     /// No progress bar (the result line is still printed, on standard output).
     #[arg(short, long)]
     pub quiet: bool,
@@ -60,7 +65,12 @@ pub fn run(a: &ReconstructArgs) -> Result<()> {
         job_memory_mib: None,
     };
     let progress = BarProgress::new(a.quiet);
-    let summary = pipeline::run(
+    let run = if a.out_of_core {
+        pipeline::run_out_of_core
+    } else {
+        pipeline::run
+    };
+    let summary = run(
         PointSource::File(&a.input),
         &params,
         &limits,

@@ -108,6 +108,11 @@ pub struct WorkerArgs {
     /// [default: the number of CPUs].
     #[arg(long)]
     pub concurrency: Option<usize>,
+    /// Points from which a job that fits its memory budget is still split into block tasks when
+    /// another worker is idle (docs/distributed.md, "Spreading a large job"); 0 never splits
+    /// such a job [default: 500000].
+    #[arg(long, value_name = "POINTS")]
+    pub spread_points: Option<u64>,
 }
 
 /// Runs the worker until it is stopped.
@@ -127,7 +132,16 @@ pub fn run(a: &WorkerArgs) -> Result<()> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    let params = crate::dist::worker::WorkerParams { nats, concurrency };
+    let spread_points = match a.spread_points {
+        Some(0) => u64::MAX,
+        Some(n) => n,
+        None => crate::dist::SPREAD_POINTS,
+    };
+    let params = crate::dist::worker::WorkerParams {
+        nats,
+        concurrency,
+        spread_points,
+    };
     rt.block_on(crate::dist::worker::run_worker(&params))
         .context("worker")
 }

@@ -16,6 +16,9 @@ pub const TASK_SUBJECTS: &str = "rbfsurf.tasks.>";
 pub const WORKER_CONSUMER: &str = "rbfsurf-workers";
 /// Key-value bucket: `job.<id>` job records, `dag.<id>` task-graph progress.
 pub const JOB_BUCKET: &str = "rbfsurf-jobs";
+/// Key-value bucket of the workers' presence: `w.<worker id>`, rewritten by each worker every
+/// [`super::presence::PERIOD`]; values older than the bucket's age limit expire.
+pub const WORKER_BUCKET: &str = "rbfsurf-workers";
 /// Object store: inputs, plans, block point sets, splines, pieces, results.
 pub const OBJECT_BUCKET: &str = "rbfsurf-objects";
 /// Deliveries of one task before the job fails.
@@ -109,6 +112,8 @@ pub struct Resources {
     pub object_stream: stream::Stream,
     /// The job bucket's stream (`KV_rbfsurf-jobs`): deleting a job purges its keys' subjects.
     pub job_stream: stream::Stream,
+    /// The workers' presence ([`super::presence`]).
+    pub workers: kv::Store,
 }
 
 /// Attempts at opening the resources (one second apart). Every step is get-or-create: when
@@ -164,6 +169,26 @@ async fn open_once(js: jetstream::Context) -> Result<Resources, DistError> {
     })
     .await
     .map_err(DistError::nats("job bucket"))?;
+    js.get_or_create_stream(stream::Config {
+        name: format!("KV_{WORKER_BUCKET}"),
+        subjects: vec![format!("$KV.{WORKER_BUCKET}.>")],
+        max_messages_per_subject: 1,
+        max_age: super::presence::MAX_AGE,
+        duplicate_window: super::presence::MAX_AGE,
+        storage: stream::StorageType::File,
+        allow_rollup: true,
+        deny_delete: true,
+        allow_direct: true,
+        discard: stream::DiscardPolicy::New,
+        num_replicas: 1,
+        ..Default::default()
+    })
+    .await
+    .map_err(DistError::nats("worker bucket"))?;
+    let workers = js
+        .get_key_value(WORKER_BUCKET)
+        .await
+        .map_err(DistError::nats("worker bucket"))?;
     let jobs = js
         .get_key_value(JOB_BUCKET)
         .await
@@ -193,6 +218,7 @@ async fn open_once(js: jetstream::Context) -> Result<Resources, DistError> {
         objects,
         object_stream,
         job_stream,
+        workers,
     })
 }
 

@@ -23,13 +23,16 @@
 pub(crate) mod connect;
 mod objects;
 mod outcome;
+pub mod presence;
 mod queue;
 mod records;
 pub(crate) mod remote;
+mod spread;
 mod steps;
 pub(crate) mod worker;
 
 pub use connect::NatsConfig;
+pub use spread::SPREAD_POINTS;
 
 /// What went wrong talking to NATS or running a task.
 #[derive(Debug, thiserror::Error)]

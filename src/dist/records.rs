@@ -49,6 +49,9 @@ pub struct DagState {
     pub prepare_s: f64,
     /// Unix milliseconds when the region phase began (0: not yet).
     pub regions_started_ms: u64,
+    /// The tasks done so far (report `tasks[]`), in the order they were recorded.
+    #[serde(default)]
+    pub tasks: Vec<crate::report::TaskReport>,
 }
 
 /// Key of job `id`'s record.

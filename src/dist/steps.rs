@@ -8,6 +8,7 @@ pub use super::outcome::{Outcome, finish_job};
 use super::outcome::{cancelled_error, discard, ended, remove_intermediates, upload_results};
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DagState, JobRecord, dag_key, job_key};
+use super::spread::{record, timing};
 use super::{DistError, connect::Resources};
 use crate::error::{ErrorKind, ReconError};
 use crate::io::{MeshFormat, PointFormat, ReadLimits};
@@ -20,7 +21,7 @@ use crate::pipeline::tiled::store::Store;
 use crate::pipeline::tiled::{self, TiledOptions};
 use crate::pipeline::{Execution, PointSource, RunError, RunOutput, plan_execution, run};
 use crate::progress::{Progress, Stage};
-use crate::report::Timings;
+use crate::report::{TaskReport, Timings};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -63,6 +64,9 @@ pub struct Ctx {
     pub worker: String,
     /// Tasks run at once (also the concurrency the block size is planned for).
     pub concurrency: usize,
+    /// Points from which a job within its budget is split when another worker is idle
+    /// ([`super::spread`]; `u64::MAX`: never).
+    pub spread_points: u64,
     /// The last plans decoded, by job (a plan rebuilds the far field: worth keeping).
     plans: Mutex<VecDeque<(Uuid, Arc<Plan>)>>,
 }
@@ -80,6 +84,7 @@ impl Ctx {
             rt,
             worker,
             concurrency,
+            spread_points: super::spread::SPREAD_POINTS,
             plans: Mutex::new(VecDeque::new()),
         }
     }
@@ -212,6 +217,7 @@ fn start(
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
     let job = rec.view.id;
+    let started_ms = unix_now_ms();
     ctx.update_job(job, |r| {
         if r.view.status == JobStatus::Queued {
             r.view.status = JobStatus::Running;
@@ -242,9 +248,26 @@ fn start(
     let cloud = crate::io::parse_point_cloud(&data, format, &limits)
         .map_err(|e| run_error(RunError::Read(e)))?;
     let n = cloud.points.len() as u64;
+    let stream = || {
+        let input = crate::io::StreamInput::Bytes {
+            data: &data,
+            format,
+        };
+        tiled::TiledInput::Stream(input, &limits)
+    };
     match plan_execution(n, params).map_err(recon_error)? {
         Execution::InMemory => {
+            let spread = super::spread::spread_over(ctx, n, params, &cloud)?;
             drop(cloud);
+            if let Some(idle) = spread {
+                tracing::info!(job = %job, points = n, idle = ?idle, "splitting the job into block tasks");
+                match prepare_graph(ctx, job, params, &stream(), n, started_ms, progress) {
+                    Err(TaskError::Job(e)) if e.code != ErrorKind::Cancelled.code() => {
+                        tracing::info!(job = %job, error = %e.message, "the task graph refused the job; running it whole");
+                    }
+                    r => return r,
+                }
+            }
             whole(
                 ctx,
                 rec,
@@ -259,12 +282,7 @@ fn start(
         }
         Execution::OutOfCore(_) => {
             drop(cloud);
-            let input = crate::io::StreamInput::Bytes {
-                data: &data,
-                format,
-            };
-            let input = tiled::TiledInput::Stream(input, &limits);
-            prepare_graph(ctx, job, params, &input, n, progress)
+            prepare_graph(ctx, job, params, &stream(), n, started_ms, progress)
         }
     }
 }
@@ -357,6 +375,7 @@ fn prepare_graph(
     params: &ReconParams,
     input: &tiled::TiledInput<'_>,
     n: u64,
+    started_ms: u64,
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
     let t = Instant::now();
@@ -397,6 +416,7 @@ fn prepare_graph(
         regions: vec![false; plan.grid.regions.len()],
         prepare_s: t.elapsed().as_secs_f64(),
         regions_started_ms: 0,
+        tasks: vec![timing("prepare", &ctx.worker, started_ms)],
     };
     ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
     if ended(ctx, job)? {
@@ -423,8 +443,15 @@ fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {
     }
 }
 
-/// Marks item `k` of the phase done; returns (done, total) after the update.
-fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, usize), TaskError> {
+/// Marks item `k` of the phase done and records its timeline entry `t`; returns (done, total)
+/// after the update.
+fn mark_done(
+    ctx: &Ctx,
+    job: Uuid,
+    k: usize,
+    regions: bool,
+    t: TaskReport,
+) -> Result<(usize, usize), TaskError> {
     let dag = ctx.block_on(records::update::<DagState, _>(
         &ctx.res.jobs,
         &dag_key(job),
@@ -438,6 +465,7 @@ fn mark_done(ctx: &Ctx, job: Uuid, k: usize, regions: bool) -> Result<(usize, us
                 return false;
             }
             flags[k] = true;
+            record(&mut d.tasks, t.clone());
             if !regions && d.blocks.iter().all(|&x| x) {
                 d.regions_started_ms = unix_now_ms();
             }
@@ -456,6 +484,7 @@ fn block(
     b: usize,
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
+    let started_ms = unix_now_ms();
     let plan = ctx.plan(job, params)?;
     let store = ctx.store(job);
     let outcome = graph::fit_step(&plan, &store, b, &ctx.worker, progress).map_err(recon_error)?;
@@ -464,7 +493,8 @@ fn block(
     if ended(ctx, job)? {
         return discard(ctx, job, &[format!("spline/{b}"), format!("block/{b}")]);
     }
-    let (done, total) = mark_done(ctx, job, b, false)?;
+    let t = timing(&format!("block {b}"), &ctx.worker, started_ms);
+    let (done, total) = mark_done(ctx, job, b, false, t)?;
     if done < total {
         return ctx.update_job(job, |r| {
             set_stage(r, Stage::Blocks, done as f64 / total as f64)
@@ -487,6 +517,7 @@ fn region(
     r: usize,
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
+    let started_ms = unix_now_ms();
     let plan = ctx.plan(job, params)?;
     let store = ctx.store(job);
     let outcome = graph::region_step(&plan, &store, r, progress).map_err(recon_error)?;
@@ -499,7 +530,8 @@ fn region(
     if ended(ctx, job)? {
         return discard(ctx, job, &[format!("piece/{r}"), format!("region/{r}")]);
     }
-    let (done, total) = mark_done(ctx, job, r, true)?;
+    let t = timing(&format!("region {r}"), &ctx.worker, started_ms);
+    let (done, total) = mark_done(ctx, job, r, true, t)?;
     if done < total {
         return ctx.update_job(job, |v| {
             set_stage(v, Stage::Polygonize, done as f64 / total as f64)
@@ -516,6 +548,7 @@ fn region(
 }
 
 fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskError> {
+    let started_ms = unix_now_ms();
     let job = rec.view.id;
     let plan = ctx.plan(job, params)?;
     let store = ctx.store(job);
@@ -556,6 +589,10 @@ fn merge(ctx: &Ctx, rec: &JobRecord, params: &ReconParams) -> Result<(), TaskErr
     let mut recon = tiled::finish(&plan, mesh, poly, residual, reports, matrix, timings, start)
         .map_err(recon_error)?;
     recon.report.memory.peak_rss_mib = recon.report.memory.peak_rss_mib.max(blocks_peak);
+    let mut tasks = dag.tasks;
+    record(&mut tasks, timing("merge", &ctx.worker, started_ms));
+    recon.report.critical_path = crate::report::critical_path(&tasks);
+    recon.report.tasks = tasks;
     let dir = tempfile::tempdir().map_err(|e| TaskError::Retry(e.to_string()))?;
     let meta = crate::io::MeshMeta::default();
     let glb = MeshFormat::Glb(rec.options.glb());

@@ -14,7 +14,7 @@ use super::steps::{self, Ctx, TaskError, TaskProgress};
 use async_nats::jetstream::{AckKind, Message};
 use futures_util::StreamExt;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 /// Period of in-progress acknowledgements and progress updates of a running task.
@@ -30,6 +30,9 @@ pub struct WorkerParams {
     pub nats: NatsConfig,
     /// Tasks at once.
     pub concurrency: usize,
+    /// Points from which a job within its memory budget is split into block tasks when another
+    /// worker is idle ([`super::spread`]).
+    pub spread_points: u64,
 }
 
 /// Runs the worker until the process is stopped.
@@ -44,13 +47,27 @@ pub async fn run_worker(p: &WorkerParams) -> Result<(), DistError> {
     let client = connect::connect(&p.nats, &format!("rbfsurf-worker {id}")).await?;
     let res = connect::open(client).await?;
     let consumer = connect::worker_consumer(&res, &p.nats).await?;
-    let ctx = Arc::new(Ctx::new(
+    let mut ctx = Ctx::new(
         res,
         tokio::runtime::Handle::current(),
         id.clone(),
         p.concurrency.max(1),
-    ));
+    );
+    ctx.spread_points = p.spread_points;
+    let ctx = Arc::new(ctx);
     let slots = Arc::new(tokio::sync::Semaphore::new(p.concurrency.max(1)));
+    let running = Arc::new(AtomicUsize::new(0));
+    let changed = Arc::new(tokio::sync::Notify::new());
+    tokio::spawn(super::presence::announce(
+        ctx.res.workers.clone(),
+        id.clone(),
+        p.concurrency.max(1),
+        {
+            let running = Arc::clone(&running);
+            move || running.load(Ordering::Relaxed)
+        },
+        Arc::clone(&changed),
+    ));
     tracing::info!(worker = %id, "waiting for tasks");
     loop {
         let Ok(permit) = Arc::clone(&slots).acquire_owned().await else {
@@ -73,8 +90,13 @@ pub async fn run_worker(p: &WorkerParams) -> Result<(), DistError> {
         match batch.next().await {
             Some(Ok(msg)) => {
                 let ctx = Arc::clone(&ctx);
+                let (running, changed) = (Arc::clone(&running), Arc::clone(&changed));
+                running.fetch_add(1, Ordering::Relaxed);
+                changed.notify_one();
                 tokio::spawn(async move {
                     handle(ctx, msg).await;
+                    running.fetch_sub(1, Ordering::Relaxed);
+                    changed.notify_one();
                     drop(permit);
                 });
             }

@@ -20,7 +20,7 @@ mod surface;
 pub mod tiled;
 
 pub use csrbf::fit_field;
-pub use run::{PointSource, RunError, RunOutput, RunSummary, run};
+pub use run::{PointSource, RunError, RunOutput, RunSummary, run, run_out_of_core};
 
 /// A reconstructed mesh (input units) with its report.
 pub struct Reconstruction {
@@ -220,6 +220,8 @@ fn reconstruct_inner(
         polygonize,
         attributes,
         blocks: Vec::new(),
+        tasks: Vec::new(),
+        critical_path: None,
     };
     let field = fit.rbf.map(|rbf| crate::frep::FieldModel {
         rbf,

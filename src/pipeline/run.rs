@@ -148,6 +148,31 @@ pub fn run(
     output: &RunOutput<'_>,
     progress: &dyn Progress,
 ) -> Result<RunSummary, RunError> {
+    run_as(source, params, limits, output, progress, false)
+}
+
+/// [`run`] through the out-of-core task graph even when the cloud fits its budget in memory
+/// (`rbfsurf reconstruct --out-of-core`): the plan is the one a cloud over the budget gets
+/// (block size from `params.max_memory_mib`), so the mesh is what the distributed executor
+/// makes of a job it splits over idle workers.
+pub fn run_out_of_core(
+    source: PointSource<'_>,
+    params: &ReconParams,
+    limits: &ReadLimits,
+    output: &RunOutput<'_>,
+    progress: &dyn Progress,
+) -> Result<RunSummary, RunError> {
+    run_as(source, params, limits, output, progress, true)
+}
+
+fn run_as(
+    source: PointSource<'_>,
+    params: &ReconParams,
+    limits: &ReadLimits,
+    output: &RunOutput<'_>,
+    progress: &dyn Progress,
+    graph: bool,
+) -> Result<RunSummary, RunError> {
     let start = Instant::now();
     let input = source.name();
     let recon_err = |source: ReconError| RunError::Reconstruct {
@@ -170,7 +195,7 @@ pub fn run(
             // out of core and never read whole; one whose points alone cannot fit is refused.
             let hint = peek_point_count(path).map_err(RunError::Read)?;
             let execution = super::plan_execution(hint.points, params).map_err(recon_err)?;
-            if let super::Execution::OutOfCore(_) = execution {
+            if graph || matches!(execution, super::Execution::OutOfCore(_)) {
                 None
             } else {
                 hint.check_budget(limits, path).map_err(RunError::Read)?;
@@ -183,6 +208,7 @@ pub fn run(
     };
     let read_s = start.elapsed().as_secs_f64();
     let in_memory = match &cloud {
+        Some(_) if graph => false,
         Some(c) => {
             super::plan_execution(c.points.len() as u64, params).map_err(recon_err)?
                 == super::Execution::InMemory

@@ -184,6 +184,17 @@ impl Nats {
 }
 
 pub fn worker(nats: &Nats, dir: &Path, name: &str, concurrency: usize) -> Proc {
+    worker_with(nats, dir, name, concurrency, &[])
+}
+
+/// A worker with extra flags (`--spread-points N`).
+pub fn worker_with(
+    nats: &Nats,
+    dir: &Path,
+    name: &str,
+    concurrency: usize,
+    extra: &[&str],
+) -> Proc {
     let mut cmd = Command::new(BIN);
     cmd.args([
         "worker",
@@ -192,6 +203,7 @@ pub fn worker(nats: &Nats, dir: &Path, name: &str, concurrency: usize) -> Proc {
         "--concurrency",
         &concurrency.to_string(),
     ])
+    .args(extra)
     .env("RBFSURF_NATS_ACK_WAIT_S", ACK_WAIT_S)
     .env("RUST_LOG", "info");
     spawn(&mut cmd, dir.join(format!("{name}.log")))

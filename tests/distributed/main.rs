@@ -7,6 +7,7 @@
 
 mod harness;
 mod lifecycle;
+mod spread;
 
 use harness::*;
 use std::path::Path;
@@ -16,7 +17,7 @@ const OUT_OF_CORE_MIB: &str = "110";
 
 /// Mesh files decoded: the same triangles over the same vertex positions, bit for bit; and the
 /// files themselves byte for byte (the plan does not depend on the executor's concurrency).
-fn assert_same_mesh(a: &Path, b: &Path) {
+pub(crate) fn assert_same_mesh(a: &Path, b: &Path) {
     let ma = rbfsurf::io::read_mesh(a).unwrap();
     let mb = rbfsurf::io::read_mesh(b).unwrap();
     assert_eq!(ma.triangles.len(), mb.triangles.len(), "{a:?} vs {b:?}");
@@ -51,7 +52,7 @@ fn torus_and_local_run(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (cloud, local)
 }
 
-fn workers_of(rep: &serde_json::Value) -> std::collections::BTreeSet<String> {
+pub(crate) fn workers_of(rep: &serde_json::Value) -> std::collections::BTreeSet<String> {
     (rep["blocks"].as_array().unwrap().iter())
         .map(|b| b["worker"].as_str().unwrap().to_string())
         .collect()
@@ -160,7 +161,7 @@ fn distributed_jobs_equal_local_runs_and_outlive_their_api_node() {
 }
 
 /// Lines of a worker log that start or finish a task of `kind`.
-fn count(log: &str, what: &str, kind: &str) -> usize {
+pub(crate) fn count(log: &str, what: &str, kind: &str) -> usize {
     log.lines()
         .filter(|l| l.contains(what) && l.contains(&format!("task={kind}")))
         .count()

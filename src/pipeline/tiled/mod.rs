@@ -327,6 +327,8 @@ pub(crate) fn finish(
             ..Default::default()
         },
         blocks,
+        tasks: Vec::new(),
+        critical_path: None,
     };
     Ok(super::Reconstruction { mesh, report })
 }
