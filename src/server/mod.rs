@@ -3,7 +3,8 @@
 //!
 //! Layout: [`config`] (limits), [`error`] (JSON errors), [`model`] (the job record), [`jobs`]
 //! (queue, workers, progress, recovery), [`store`] (files under the data directory), [`routes`] (handlers), [`openapi`],
-//! [`volume`] (composition and morph jobs over finished jobs' fields).
+//! [`volume`] (composition and morph jobs over finished jobs' fields), [`linger`] (the answer to a
+//! request refused before its body was read reaches clients that send the whole body first).
 //! The server only calls the library (`io`, `params`, `reconstruct`); it adds no numerics.
 //! Design: the HTTP API section of the design notes; the seed's online server with browser view.
 
@@ -11,6 +12,7 @@ pub mod config;
 pub mod error;
 pub mod feasibility;
 pub mod jobs;
+pub mod linger;
 pub mod model;
 pub mod openapi;
 pub mod remote;
@@ -50,7 +52,8 @@ impl AppState {
     }
 }
 
-/// The complete application: documented routes, JSON fallbacks, body limit, CORS, request logs.
+/// The complete application: documented routes, JSON fallbacks, body limit, CORS, request logs,
+/// lingering close of refused bodies.
 pub fn router(state: AppState) -> Router {
     let cfg = state.jobs.config().clone();
     let (api, _) = openapi::api_router().split_for_parts();
@@ -65,11 +68,20 @@ pub fn router(state: AppState) -> Router {
     if let Some(cors) = cors_layer(&cfg.cors_origins) {
         app = app.layer(cors);
     }
+    let bounds = linger::Linger {
+        max_bytes: cfg.max_upload_bytes.saturating_mul(2),
+        max_time: cfg.linger,
+    };
     app.layer(
         TraceLayer::new_for_http()
             .make_span_with(DefaultMakeSpan::new().level(Level::INFO))
             .on_response(DefaultOnResponse::new().level(Level::INFO)),
     )
+    .layer(axum::middleware::from_fn(
+        move |req: axum::extract::Request, next: axum::middleware::Next| {
+            linger::linger(bounds, req, next)
+        },
+    ))
 }
 
 fn cors_layer(origins: &[String]) -> Option<CorsLayer> {
