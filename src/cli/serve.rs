@@ -105,6 +105,7 @@ impl ServeArgs {
             max_memory_mib,
             max_resolution,
             idle_timeout: d.idle_timeout,
+            linger: d.linger,
             min_upload_rate: min_rate << 10,
             upload_slot_wait: d.upload_slot_wait,
             job_timeout: Duration::from_secs(timeout),

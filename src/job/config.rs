@@ -29,6 +29,11 @@ pub struct ServerConfig {
     /// A connection that sends no byte for this long while the server waits for its request
     /// (headers or body) is closed (default 5 s).
     pub idle_timeout: Duration,
+    /// After an answer given before the request body was read (a refusal from the headers or the
+    /// query), the body is still read and discarded for at most this long, and at most twice
+    /// `max_upload_bytes`, so that clients which send the whole body before reading get the
+    /// answer; then the connection closes (default 5 s; the lingering close of the HTTP layer).
+    pub linger: Duration,
     /// Slowest accepted upload, bytes per second averaged from the start of the body; slower
     /// uploads are refused with 408 (default 64 KiB/s; checked after the first `idle_timeout`).
     pub min_upload_rate: u64,
@@ -59,6 +64,7 @@ impl Default for ServerConfig {
             max_memory_mib: 8192,
             max_resolution: 1024,
             idle_timeout: Duration::from_secs(5),
+            linger: Duration::from_secs(5),
             min_upload_rate: 64 << 10,
             upload_slot_wait: Duration::from_secs(30),
             job_timeout: Duration::from_secs(600),

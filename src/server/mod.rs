@@ -2,12 +2,14 @@
 //! queue, server-sent progress, an embedded WebGL viewer and an OpenAPI document.
 //!
 //! Layout: [`error`] (HTTP errors), [`feasibility`] (submit-time checks), [`routes`] (handlers),
-//! [`openapi`]; the job model, queue, store and limits below it are [`crate::job`].
+//! [`openapi`], [`linger`] (the answer to a request refused before its
+//! body was read reaches clients that send the whole body first); the job model, queue, store and limits below it are [`crate::job`].
 //! The server only calls the library (`io`, `params`, `reconstruct`); it adds no numerics.
 //! Design: the HTTP API section of the design notes; the seed's online server with browser view.
 
 pub(crate) mod error;
 pub(crate) mod feasibility;
+pub(crate) mod linger;
 #[cfg(feature = "nats")]
 pub mod nats;
 pub mod openapi;
@@ -44,7 +46,8 @@ impl AppState {
     }
 }
 
-/// The complete application: documented routes, JSON fallbacks, body limit, CORS, request logs.
+/// The complete application: documented routes, JSON fallbacks, body limit, CORS, request logs,
+/// lingering close of refused bodies.
 pub fn router(state: AppState) -> Router {
     let cfg = state.jobs.config().clone();
     let (api, _) = openapi::api_router().split_for_parts();
@@ -59,11 +62,20 @@ pub fn router(state: AppState) -> Router {
     if let Some(cors) = cors_layer(&cfg.cors_origins) {
         app = app.layer(cors);
     }
+    let bounds = linger::Linger {
+        max_bytes: cfg.max_upload_bytes.saturating_mul(2),
+        max_time: cfg.linger,
+    };
     app.layer(
         TraceLayer::new_for_http()
             .make_span_with(DefaultMakeSpan::new().level(Level::INFO))
             .on_response(DefaultOnResponse::new().level(Level::INFO)),
     )
+    .layer(axum::middleware::from_fn(
+        move |req: axum::extract::Request, next: axum::middleware::Next| {
+            linger::linger(bounds, req, next)
+        },
+    ))
 }
 
 fn cors_layer(origins: &[String]) -> Option<CorsLayer> {

@@ -8,6 +8,7 @@ mod common;
 mod hostile;
 mod http;
 mod load;
+mod python_clients;
 #[path = "../library/scanner_files.rs"]
 mod scanner_files;
 #[path = "../server_common/mod.rs"]
