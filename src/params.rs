@@ -389,10 +389,8 @@ impl Range {
 }
 
 /// `support`: a radius in (0, 2] normalised units.
-pub const SUPPORT: Range = Range::num("support", 0.0, true, Some(2.0)).said(
-    "a radius",
-    " normalised units (the longest bbox edge is 1)",
-);
+pub const SUPPORT: Range = Range::num("support", 0.0, true, Some(2.0))
+    .said("a radius", " normalised units (the longest bbox edge is 1)");
 /// `neighbours`: 4..=2000.
 pub const NEIGHBOURS: Range = Range::int("neighbours", 4, 2000);
 /// `resolution`: 8..=4096 (a server may allow less).
@@ -417,15 +415,13 @@ pub const LEVELS: Range = Range::int("levels", 1, 8);
 pub const MIN_COMPONENT: Range = Range::num("min-component", 0.0, false, Some(1.0))
     .said("a fraction of the largest component", "");
 /// `min-support`: [0, 0.5].
-pub const MIN_SUPPORT: Range = Range::num("min-support", 0.0, false, Some(0.5))
-    .said("a fraction of the data points", "");
+pub const MIN_SUPPORT: Range =
+    Range::num("min-support", 0.0, false, Some(0.5)).said("a fraction of the data points", "");
 /// `max-handle-loop`: [0, 4] support radii. Real handles can be that short (the elephant's trunk
 /// and legs: 3.5 R on a 10k sample), and the search's cost grows steeply with the length (man 26k
 /// `x y z`, idle: 0.9 s at 2 R, 8.3 s at 4 R, 93 s at 8 R).
-pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Some(4.0)).said(
-    "a loop length in support radii",
-    " (0 keeps every handle)",
-);
+pub const MAX_HANDLE_LOOP: Range = Range::num("max-handle-loop", 0.0, false, Some(4.0))
+    .said("a loop length in support radii", " (0 keeps every handle)");
 /// Default `max-handle-loop`, support radii: the spurious handles of 10k-point statue samples
 /// measured 0.1–2.0 R; the real ones measured 3.5 R and more (the elephant's).
 pub const DEFAULT_MAX_HANDLE_LOOP: f64 = 2.0;
@@ -731,7 +727,8 @@ impl TryFrom<&ReconOptions> for ReconParams {
             return Err(ParamError {
                 name,
                 value,
-                expected: "only with method csrbf (variational and mls choose their own scale)".into(),
+                expected: "only with method csrbf (variational and mls choose their own scale)"
+                    .into(),
             });
         }
         let p = ReconParams {

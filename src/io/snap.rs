@@ -196,9 +196,7 @@ fn non_manifold_vertices(triangles: &[[u32; 3]], wanted: &[bool]) -> Vec<bool> {
         let inside = t.iter().all(|&v| (v as usize) < n);
         (inside && wanted[t[i] as usize]).then(|| (t[i], (t[(i + 1) % 3], t[(i + 2) % 3])))
     });
-    (0..n)
-        .map(|v| wanted[v] && !is_disc(link.of(v)))
-        .collect()
+    (0..n).map(|v| wanted[v] && !is_disc(link.of(v))).collect()
 }
 
 /// Whether the oriented link edges form one cycle or one path. A fan has a handful of edges, so

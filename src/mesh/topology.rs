@@ -162,9 +162,7 @@ pub(crate) fn sorted_half_edges(triangles: &[[u32; 3]]) -> Vec<(u64, u32)> {
     let upper = by_lower_vertex(triangles, |hi, ti, _| (u64::from(hi) << 32) | ti as u64);
     let mut half = Vec::with_capacity(upper.len());
     for lo in 0..upper.vertices() {
-        half.extend(
-            (upper.of(lo).iter()).map(|&x| (((lo as u64) << 32) | (x >> 32), x as u32)),
-        );
+        half.extend((upper.of(lo).iter()).map(|&x| (((lo as u64) << 32) | (x >> 32), x as u32)));
     }
     half
 }

@@ -28,8 +28,8 @@ use super::graph::riemannian_edges;
 use super::parity::parity_flips;
 use super::patches::{Patches, components, grow_patches};
 use super::regions::inward_regions;
-use crate::mesh::incidence::SignedSets;
 use crate::geometry::{Point3, dot, sub};
+use crate::mesh::incidence::SignedSets;
 
 /// Edges at least this confident join points into one patch: the mirrored normal within 15° of
 /// the other (looser thresholds join near-touching sheets, whose edges are ~20–30° off).

@@ -8,8 +8,8 @@
 //! is oriented without walking it. `O(E α(n))` after the edges are sorted.
 
 use super::graph::Edge;
-use crate::mesh::incidence::SignedSets;
 use crate::geometry::Point3;
+use crate::mesh::incidence::SignedSets;
 
 /// A partition of the points into patches, each internally consistently oriented.
 #[derive(Debug, Clone, PartialEq)]

@@ -185,8 +185,9 @@ fn run_as(
         return Err(recon_err(ReconError::Params(crate::params::ParamError {
             name: "method",
             value: params.method.name().to_string(),
-            expected: "csrbf when saving the field (--save-field): the global methods have no saved form"
-                .into(),
+            expected:
+                "csrbf when saving the field (--save-field): the global methods have no saved form"
+                    .into(),
         })));
     }
     let cloud = match source {

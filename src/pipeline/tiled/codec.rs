@@ -7,9 +7,9 @@
 use super::graph::{BlockOutcome, RegionOutcome};
 use super::prepare::{BlockBox, CarrierPlan, Plan};
 use super::store::PointSet;
-use crate::error::StoreError;
 use super::tasks::{CellRange, GridPlan};
 use crate::clean::CleanStats;
+use crate::error::StoreError;
 use crate::geometry::{Aabb, Normalization, Point3};
 use crate::params::{ReconParams, Smoothing};
 use crate::polygonize::PolygonizeStats;

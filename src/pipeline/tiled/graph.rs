@@ -48,13 +48,10 @@ pub(crate) fn fit_step(
 ) -> Result<BlockOutcome, ReconError> {
     let t = Instant::now();
     let key = block_key(b);
-    let set = PointSet::decode(&store.get(&key)?, &key)
-        ?;
+    let set = PointSet::decode(&store.get(&key)?, &key)?;
     let fitted = tasks::fit_block(plan, b, &set, &Quiet(progress))?;
     drop(set);
-    store
-        .put(&spline_key(b), fitted.spline.encode())
-        ?;
+    store.put(&spline_key(b), fitted.spline.encode())?;
     Ok(BlockOutcome {
         report: BlockReport {
             id: b,
@@ -81,9 +78,7 @@ pub(crate) fn region_step(
     }
     let splines = region_splines(plan, store, r)?;
     let piece = tasks::polygonize_region(plan, r, &set, splines, &Quiet(progress))?;
-    store
-        .put(&piece_key(r), store::encode_piece(&piece.mesh))
-        ?;
+    store.put(&piece_key(r), store::encode_piece(&piece.mesh))?;
     let (sum2, max, count) = piece.residual;
     Ok(Some(RegionOutcome {
         stats: piece.stats,
@@ -119,8 +114,7 @@ pub(crate) fn weld_step(
         max = max.max(o.max);
         count += o.count;
         let key = piece_key(r);
-        let piece = store::decode_piece(&store.get(&key)?, &key)
-            ?;
+        let piece = store::decode_piece(&store.get(&key)?, &key)?;
         store.remove(&key);
         super::merge::append_piece(&mut mesh, &mut seen, piece, r, &plan.grid.region_box(r));
     }
@@ -163,8 +157,7 @@ fn region_points(plan: &Plan, store: &Store, r: usize) -> Result<PointSet, Recon
             continue;
         }
         let key = block_key(b);
-        let set = PointSet::decode(&store.get(&key)?, &key)
-            ?;
+        let set = PointSet::decode(&store.get(&key)?, &key)?;
         for (k, p) in set.points.iter().enumerate() {
             if reach.contains(p) {
                 rows.push((set.ids[k], *p, set.normals.as_ref().map(|n| n[k])));
@@ -194,8 +187,7 @@ fn region_splines(
             continue;
         }
         let key = spline_key(b);
-        let data = SplineData::decode(&store.get(&key)?, &key)
-            ?;
+        let data = SplineData::decode(&store.get(&key)?, &key)?;
         if !data.levels.is_empty() {
             out.push((b, tasks::spline_from_data(data, &plan.params)?));
         }

@@ -23,11 +23,11 @@
 //! Memory: the subsample and its tree, the spill buffers, one patch and one block per thread —
 //! nothing proportional to the cloud.
 
+use super::TiledOptions;
 use super::route;
 use super::store::Store;
 use super::survey::{self, Survey, TiledInput};
 use super::tasks::{GridPlan, block_key};
-use super::TiledOptions;
 use crate::clean::{CleanStats, check_degenerate};
 use crate::error::{ReconError, StoreError};
 use crate::geometry::{Aabb, Normalization, Point3};
@@ -112,7 +112,9 @@ pub(crate) struct Plan {
 /// Refuse what the task graph cannot do before any work.
 pub(crate) fn check_supported(params: &ReconParams) -> Result<(), ReconError> {
     if params.method != crate::params::Method::Csrbf {
-        return Err(ReconError::OutOfCoreUnsupported("--method other than csrbf"));
+        return Err(ReconError::OutOfCoreUnsupported(
+            "--method other than csrbf",
+        ));
     }
     if params.boundary == Boundary::Trim {
         return Err(ReconError::OutOfCoreUnsupported("--boundary trim"));
@@ -542,8 +544,7 @@ fn write_blocks(
                 drop(records);
                 let _ = std::fs::remove_file(&path);
                 let members = set.points.iter().filter(|p| outer.contains(p)).count();
-                store
-                    .put(&block_key(b), set.encode())?;
+                store.put(&block_key(b), set.encode())?;
                 Ok((
                     BlockBox {
                         core,
