@@ -344,10 +344,10 @@ fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), Tas
         &objects::name(job, &rec.view.input.file),
     ))?;
     let req = VolumeRequest::decode(&bytes).map_err(TaskError::Job)?;
-    let ids = req.validate().map_err(|message| {
+    let ids = req.validate().map_err(|e| {
         TaskError::Job(ErrorBody {
-            code: ErrorKind::BadParameter.code().into(),
-            message,
+            code: e.code().into(),
+            message: e.to_string(),
         })
     })?;
     let mut fields = std::collections::HashMap::new();

@@ -19,30 +19,79 @@ pub const MAX_FRAMES: usize = 64;
 /// `POST /v1/compositions`: an expression over finished jobs' fields and primitives.
 #[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
+#[schema(example = json!({"expression": "difference(sphere(0, 0, 0, 0.4), box(0, 0, 0, 1, 1, 1))", "resolution": 24}))]
 pub struct CompositionRequest {
     /// The expression (docs/volume-modelling.md); field operands are job ids, e.g.
-    /// `difference(0b6f…-…, sphere(0, 0, 0, 0.3))`.
+    /// `difference(0b6f…-…, sphere(0, 0, 0, 0.3))`. One that does not parse is answered 422.
     pub expression: String,
-    /// Grid cells along the longest edge (default 160, at most 400).
+    /// Grid cells along the longest edge (default 160, 8..=400).
+    #[schema(minimum = 8, maximum = 400)]
+    #[serde(default, deserialize_with = "integral")]
     pub resolution: Option<usize>,
+}
+
+/// An optional count from a JSON integer or from a number without a fractional part (`24.0`),
+/// as JSON Schema's `integer` allows.
+fn integral<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<usize>, D::Error> {
+    let Some(n) = Option::<serde_json::Number>::deserialize(d)? else {
+        return Ok(None);
+    };
+    let whole = n.as_u64().or_else(|| {
+        n.as_f64()
+            .filter(|f| f.fract() == 0.0 && *f >= 0.0 && *f <= u64::MAX as f64)
+            .map(|f| f as u64)
+    });
+    whole
+        .and_then(|v| usize::try_from(v).ok())
+        .map(Some)
+        .ok_or_else(|| serde::de::Error::custom(format!("{n} is not a count (a whole number ≥ 0)")))
 }
 
 /// `POST /v1/morphs`: a metamorphosis between two expressions (job ids or primitives).
 #[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
+#[schema(example = json!({"a": "sphere(0, 0, 0, 0.4)", "b": "box(-0.3, -0.3, -0.3, 0.3, 0.3, 0.3)", "frames": 3, "resolution": 16}))]
 pub struct MorphRequest {
-    /// The start (an expression; a job id alone is the simplest).
+    /// The start (an expression; a job id alone is the simplest). One that does not parse is
+    /// answered 422, as for `b` and `obstacle`.
     pub a: String,
     /// The end, aligned to the start first.
     pub b: String,
     /// Frames including both ends (default 8, 2..=64).
+    #[schema(minimum = 2, maximum = 64)]
+    #[serde(default, deserialize_with = "integral")]
     pub frames: Option<usize>,
     /// An expression no frame may enter.
     pub obstacle: Option<String>,
     /// `bbox` (default), `pca` or `none`.
+    #[schema(pattern = "^(bbox|pca|none)$")]
     pub align: Option<String>,
-    /// Grid cells along the longest edge (default 128, at most 400).
+    /// Grid cells along the longest edge (default 128, 8..=400).
+    #[schema(minimum = 8, maximum = 400)]
+    #[serde(default, deserialize_with = "integral")]
     pub resolution: Option<usize>,
+}
+
+/// Why a volume request cannot be run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum VolumeRequestError {
+    /// A number outside its range or an unknown `align` (the request's schema states them).
+    #[error("{0}")]
+    Range(String),
+    /// An expression that does not parse, calls an unknown operation, or names an operand that
+    /// is not a job id.
+    #[error("{0}")]
+    Expression(String),
+}
+
+impl VolumeRequestError {
+    /// The error body's code: `bad_parameter` or `invalid_expression`.
+    pub fn code(&self) -> &'static str {
+        match self {
+            VolumeRequestError::Range(_) => "bad_parameter",
+            VolumeRequestError::Expression(_) => "invalid_expression",
+        }
+    }
 }
 
 /// The stored request of a volume job (`request.json`).
@@ -76,7 +125,8 @@ impl VolumeRequest {
     }
 
     /// Check ranges and parse every expression; returns the job ids the operands name.
-    pub fn validate(&self) -> Result<Vec<Uuid>, String> {
+    pub fn validate(&self) -> Result<Vec<Uuid>, VolumeRequestError> {
+        use VolumeRequestError::{Expression, Range};
         let (res, frames) = match self {
             VolumeRequest::Composition(c) => (c.resolution, None),
             VolumeRequest::Morph(m) => (m.resolution, m.frames),
@@ -84,26 +134,28 @@ impl VolumeRequest {
         if let Some(r) = res
             && !(8..=MAX_RESOLUTION).contains(&r)
         {
-            return Err(format!("resolution {r} is outside 8..={MAX_RESOLUTION}"));
+            return Err(Range(format!(
+                "resolution {r} is outside 8..={MAX_RESOLUTION}"
+            )));
         }
         if let Some(f) = frames
             && !(2..=MAX_FRAMES).contains(&f)
         {
-            return Err(format!("frames {f} is outside 2..={MAX_FRAMES}"));
+            return Err(Range(format!("frames {f} is outside 2..={MAX_FRAMES}")));
         }
         if let VolumeRequest::Morph(m) = self {
-            align(m)?;
+            align(m).map_err(Range)?;
         }
         let mut ids = Vec::new();
         for e in self.expressions() {
-            let parsed = parse(e).map_err(|e| e.to_string())?;
+            let parsed = parse(e).map_err(|e| Expression(e.to_string()))?;
             for p in parsed.paths() {
                 let id = Uuid::parse_str(p).map_err(|_| {
-                    format!("operand '{p}' is not a job id (operands are finished job ids or primitives)")
+                    Expression(format!("operand '{p}' is not a job id (operands are finished job ids or primitives)"))
                 })?;
                 ids.push(id);
             }
-            check_calls(&parsed)?;
+            check_calls(&parsed).map_err(Expression)?;
         }
         Ok(ids)
     }
@@ -186,9 +238,9 @@ pub fn run_volume(
     report_path: &std::path::Path,
     progress: &dyn Progress,
 ) -> Result<usize, ErrorBody> {
-    let ids = req.validate().map_err(|m| ErrorBody {
-        code: "bad_parameter".into(),
-        message: m,
+    let ids = req.validate().map_err(|e| ErrorBody {
+        code: e.code().into(),
+        message: e.to_string(),
     })?;
     let mut loader = Loader::preloaded_only();
     for op in ids {

@@ -113,9 +113,41 @@ pub fn parameter_schema(name: &str) -> Option<serde_json::Value> {
     Some(schema)
 }
 
-/// What the annotations cannot say: every query parameter's type, range or enumeration, and the
-/// server-sent events' format.
+/// What the annotations cannot say: every query parameter's type, range or enumeration (also as
+/// the multipart upload's text fields), and the server-sent events' format.
 fn contract(doc: &mut serde_json::Value) {
+    query_parameters(doc);
+    multipart_fields(doc);
+    let Some(paths) = doc.get_mut("paths").and_then(|p| p.as_object_mut()) else {
+        return;
+    };
+    let events = "/v1/reconstructions/{id}/events";
+    if let Some(ok) = paths
+        .get_mut(events)
+        .and_then(|i| i.pointer_mut("/get/responses/200"))
+    {
+        ok["content"] = serde_json::json!({
+            "text/event-stream": {
+                "schema": {
+                    "type": "object",
+                    "description": "A stream of server-sent events. Each event is `event: progress` (while the job is queued or running) or `event: done` (once, with the terminal state; the stream then ends), followed by `data: ` and the job as one line of JSON (schema JobView). Comment lines (`:`) keep the connection alive.",
+                    "properties": {
+                        "event": {"type": "string", "enum": ["progress", "done"]},
+                        "data": {
+                            "type": "string",
+                            "contentMediaType": "application/json",
+                            "description": "The job (schema JobView) as one line of JSON.",
+                        },
+                    },
+                    "required": ["event", "data"],
+                },
+            }
+        });
+    }
+}
+
+/// Each query parameter's schema from [`parameter_schema`].
+fn query_parameters(doc: &mut serde_json::Value) {
     let Some(paths) = doc.get_mut("paths").and_then(|p| p.as_object_mut()) else {
         return;
     };
@@ -137,19 +169,26 @@ fn contract(doc: &mut serde_json::Value) {
             }
         }
     }
-    let events = "/v1/reconstructions/{id}/events";
-    if let Some(ok) = paths
-        .get_mut(events)
-        .and_then(|i| i.pointer_mut("/get/responses/200"))
-    {
-        ok["content"] = serde_json::json!({
-            "text/event-stream": {
-                "schema": {
-                    "type": "string",
-                    "description": "A stream of server-sent events. Each event is `event: progress` (while the job is queued or running) or `event: done` (once, with the terminal state; the stream then ends), followed by `data: ` and the job as one line of JSON (schema JobView). Comment lines (`:`) keep the connection alive.",
-                },
-                "example": "event: progress\ndata: {\"id\":\"…\",\"status\":\"running\",\"stage\":\"factor\",\"progress\":0.42,…}\n\nevent: done\ndata: {\"id\":\"…\",\"status\":\"succeeded\",…}\n\n",
-            }
-        });
+}
+
+/// The multipart upload takes the upload's query parameters as text fields too: each is a
+/// property of `MultipartUpload` with the query's schema, and no other field is accepted.
+fn multipart_fields(doc: &mut serde_json::Value) {
+    let fields: Vec<(String, serde_json::Value)> = doc
+        .pointer("/paths/~1v1~1reconstructions/post/parameters")
+        .and_then(|p| p.as_array())
+        .into_iter()
+        .flatten()
+        .filter(|p| p["in"] == "query")
+        .filter_map(|p| Some((p["name"].as_str()?.to_string(), p["schema"].clone())))
+        .collect();
+    let Some(upload) = doc.pointer_mut("/components/schemas/MultipartUpload") else {
+        return;
+    };
+    if let Some(props) = upload["properties"].as_object_mut() {
+        for (name, schema) in fields {
+            props.entry(name).or_insert(schema);
+        }
     }
+    upload["additionalProperties"] = serde_json::json!(false);
 }

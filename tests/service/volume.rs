@@ -214,7 +214,7 @@ async fn fields_compositions_and_morphs_over_http() {
     for (body, status) in [
         (
             serde_json::json!({"expression": "union(/etc/passwd, sphere(0,0,0,1))"}),
-            StatusCode::BAD_REQUEST,
+            StatusCode::UNPROCESSABLE_ENTITY,
         ),
         (
             serde_json::json!({"expression": "union(00000000-0000-4000-8000-000000000000, sphere(0,0,0,1))"}),
@@ -222,11 +222,11 @@ async fn fields_compositions_and_morphs_over_http() {
         ),
         (
             serde_json::json!({"expression": format!("onion({id}, {id})")}),
-            StatusCode::BAD_REQUEST,
+            StatusCode::UNPROCESSABLE_ENTITY,
         ),
         (
             serde_json::json!({"expression": format!("union({id}, {cid})")}),
-            StatusCode::BAD_REQUEST,
+            StatusCode::UNPROCESSABLE_ENTITY,
         ),
         (
             serde_json::json!({"expression": "sphere(0,0,0,1)", "resolution": 100000}),
@@ -235,6 +235,10 @@ async fn fields_compositions_and_morphs_over_http() {
         (
             serde_json::json!({"expr": "sphere(0,0,0,1)"}),
             StatusCode::BAD_REQUEST,
+        ),
+        (
+            serde_json::json!({"expression": "x".repeat(70_000)}),
+            StatusCode::PAYLOAD_TOO_LARGE,
         ),
     ] {
         let a = post(

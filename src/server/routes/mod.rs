@@ -167,7 +167,8 @@ pub fn parse_params(
 
 /// 422 `conflicting_parameters` for pairs that are each valid but cannot go together (the
 /// OpenAPI document cannot express that between query parameters, so this is 422, not 400):
-/// `support` with `neighbours`, and either with a method other than `csrbf`.
+/// a parameter given twice (in the query and as a multipart field, or twice in either), `support`
+/// with `neighbours`, and either with a method other than `csrbf`.
 fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
     let has = |n: &str| pairs.iter().any(|p| p.0 == n);
     let conflict = |m: &str| {
@@ -177,6 +178,13 @@ fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
             m.to_string(),
         ))
     };
+    if let Some((i, p)) = (pairs.iter().enumerate()).find(|(i, p)| pairs[..*i].iter().any(|q| q.0 == p.0)) {
+        let first = pairs.iter().take(i).find(|q| q.0 == p.0).map_or("", |q| q.1.as_str());
+        return conflict(&format!(
+            "parameter {} is given twice ({first:?} and {:?}; the query and multipart fields are one set): give it once",
+            p.0, p.1
+        ));
+    }
     if has("support") && has("neighbours") {
         return conflict(
             "support (a radius) and neighbours (a count) both choose the support: give one of them",

@@ -6,6 +6,7 @@
 use super::{authorize, job_response};
 use crate::job::volume::{
     COMPOSITION, CompositionRequest, MORPH, MorphRequest, REQUEST_FILE, VolumeRequest,
+    VolumeRequestError,
 };
 use crate::job::{InputInfo, JobStatus};
 use crate::server::AppState;
@@ -29,7 +30,12 @@ async fn submit(
     if st.jobs.is_shutting_down() {
         return Err(crate::job::SubmitError::ShuttingDown.into());
     }
-    let ids = req.validate().map_err(ApiError::bad_parameter)?;
+    let ids = req.validate().map_err(|e| match e {
+        VolumeRequestError::Range(m) => ApiError::bad_parameter(m),
+        VolumeRequestError::Expression(m) => {
+            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_expression", m)
+        }
+    })?;
     for id in &ids {
         let job = st
             .jobs
@@ -48,9 +54,13 @@ async fn submit(
             ));
         }
         if !st.jobs.store().file(*id, "fitted.field").exists() {
-            return Err(ApiError::bad_parameter(format!(
-                "operand job {id} has no saved field (only csrbf reconstructions have one)"
-            )));
+            return Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_expression",
+                format!(
+                    "operand job {id} has no saved field (only csrbf reconstructions have one)"
+                ),
+            ));
         }
     }
     if !st.jobs.has_room() {
@@ -83,7 +93,7 @@ async fn submit(
 
 fn body<T: serde::de::DeserializeOwned>(bytes: &Bytes) -> Result<T, ApiError> {
     if bytes.len() > MAX_BODY {
-        return Err(ApiError::bad_parameter(format!(
+        return Err(ApiError::too_large(format!(
             "the request body is over {MAX_BODY} bytes"
         )));
     }
@@ -95,8 +105,10 @@ fn body<T: serde::de::DeserializeOwned>(bytes: &Bytes) -> Result<T, ApiError> {
 #[utoipa::path(post, path = "/v1/compositions", tag = "volume",
     request_body = CompositionRequest,
     responses((status = 202, description = "queued", body = crate::server::routes::JobResponse),
-        (status = 400, body = ErrorResponse), (status = 404, description = "an operand job does not exist", body = ErrorResponse),
+        (status = 400, description = "a malformed body, or `resolution` out of range", body = ErrorResponse), (status = 404, description = "an operand job does not exist", body = ErrorResponse),
         (status = 409, description = "an operand job has not finished", body = ErrorResponse),
+        (status = 413, description = "a body over 64 KiB", body = ErrorResponse),
+        (status = 422, description = "`invalid_expression`: the expression does not parse, calls an unknown operation or names an operand that is not a job id or has no saved field", body = ErrorResponse),
         (status = 429, body = ErrorResponse), (status = 503, description = "`shutting_down`, or `job_store_unavailable` (NATS-backed node)", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_composition(
@@ -113,8 +125,11 @@ pub async fn create_composition(
 #[utoipa::path(post, path = "/v1/morphs", tag = "volume",
     request_body = MorphRequest,
     responses((status = 202, description = "queued", body = crate::server::routes::JobResponse),
-        (status = 400, body = ErrorResponse), (status = 404, body = ErrorResponse),
-        (status = 409, body = ErrorResponse), (status = 429, body = ErrorResponse), (status = 503, description = "`shutting_down`, or `job_store_unavailable` (NATS-backed node)", body = ErrorResponse)),
+        (status = 400, description = "a malformed body, or `frames`, `resolution` or `align` out of range", body = ErrorResponse), (status = 404, description = "an operand job does not exist", body = ErrorResponse),
+        (status = 409, description = "an operand job has not finished", body = ErrorResponse),
+        (status = 413, description = "a body over 64 KiB", body = ErrorResponse),
+        (status = 422, description = "`invalid_expression`: an expression does not parse, calls an unknown operation or names an operand that is not a job id or has no saved field", body = ErrorResponse),
+        (status = 429, body = ErrorResponse), (status = 503, description = "`shutting_down`, or `job_store_unavailable` (NATS-backed node)", body = ErrorResponse)),
     security((), ("bearer" = [])))]
 pub async fn create_morph(
     State(st): State<AppState>,
