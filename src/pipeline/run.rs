@@ -148,7 +148,7 @@ pub fn run(
     output: &RunOutput<'_>,
     progress: &dyn Progress,
 ) -> Result<RunSummary, RunError> {
-    run_as(source, params, limits, output, progress, false)
+    run_as(source, params, limits, output, progress, Route::ByBudget)
 }
 
 /// [`run`] through the out-of-core task graph even when the cloud fits its budget in memory
@@ -162,7 +162,16 @@ pub fn run_out_of_core(
     output: &RunOutput<'_>,
     progress: &dyn Progress,
 ) -> Result<RunSummary, RunError> {
-    run_as(source, params, limits, output, progress, true)
+    run_as(source, params, limits, output, progress, Route::OutOfCore)
+}
+
+/// Which pipeline [`run_as`] takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    /// In memory when the cloud fits `params.max_memory_mib`, else the out-of-core task graph.
+    ByBudget,
+    /// Always the out-of-core task graph.
+    OutOfCore,
 }
 
 fn run_as(
@@ -171,7 +180,7 @@ fn run_as(
     limits: &ReadLimits,
     output: &RunOutput<'_>,
     progress: &dyn Progress,
-    graph: bool,
+    route: Route,
 ) -> Result<RunSummary, RunError> {
     let start = Instant::now();
     let input = source.name();
@@ -196,7 +205,7 @@ fn run_as(
             // out of core and never read whole; one whose points alone cannot fit is refused.
             let hint = peek_point_count(path).map_err(RunError::Read)?;
             let execution = super::plan_execution(hint.points, params).map_err(recon_err)?;
-            if graph || matches!(execution, super::Execution::OutOfCore(_)) {
+            if route == Route::OutOfCore || matches!(execution, super::Execution::OutOfCore(_)) {
                 None
             } else {
                 hint.check_budget(limits, path).map_err(RunError::Read)?;
@@ -209,7 +218,7 @@ fn run_as(
     };
     let read_s = start.elapsed().as_secs_f64();
     let in_memory = match &cloud {
-        Some(_) if graph => false,
+        Some(_) if route == Route::OutOfCore => false,
         Some(c) => {
             super::plan_execution(c.points.len() as u64, params).map_err(recon_err)?
                 == super::Execution::InMemory
