@@ -22,6 +22,9 @@ pub(crate) trait PointSink {
     fn reserve(&mut self, n: usize);
     /// One point and, when the format has them, its normal.
     fn push(&mut self, p: Point3, n: Option<Point3>) -> Result<(), IoError>;
+    /// The colour of the point just pushed (red, green, blue in [0, 1], as stored), when the
+    /// format has one; ignored unless the sink keeps colours.
+    fn push_color(&mut self, _c: [f32; 3]) {}
 }
 
 /// Collects the points into arrays (the readers' in-memory form).
@@ -29,12 +32,16 @@ pub(crate) trait PointSink {
 pub(crate) struct VecSink {
     points: Vec<Point3>,
     normals: Vec<Point3>,
+    colors: Vec<[f32; 3]>,
 }
 
 impl VecSink {
-    /// The collected cloud; normals only when the format has them.
+    /// The collected cloud; normals only when the format has them, colours when every point
+    /// had one.
     pub(crate) fn into_cloud(self, has_normals: bool) -> PointCloud {
+        let colored = !self.colors.is_empty() && self.colors.len() == self.points.len();
         PointCloud {
+            colors: colored.then_some(self.colors),
             points: self.points,
             normals: has_normals.then_some(self.normals),
             ..Default::default()
@@ -62,6 +69,14 @@ impl PointSink for VecSink {
         }
         self.points.push(p);
         Ok(())
+    }
+
+    fn push_color(&mut self, c: [f32; 3]) {
+        if self.colors.capacity() < self.points.capacity() {
+            let more = self.points.capacity() - self.colors.len();
+            self.colors.reserve_exact(more);
+        }
+        self.colors.push(c);
     }
 }
 

@@ -127,8 +127,32 @@ fn e57_custom(
     std::fs::read(&path).unwrap()
 }
 
+/// A binary PLY of `scan` with double coordinates and red, green, blue as `uchar` (the 16-bit
+/// values' high bytes) or as `ushort`.
+fn ply_bytes(scan: &Scan, sixteen: bool) -> Vec<u8> {
+    let ty = if sixteen { "ushort" } else { "uchar" };
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty double x\n\
+         property double y\nproperty double z\nproperty {ty} red\nproperty {ty} green\n\
+         property {ty} blue\nend_header\n",
+        scan.points.len()
+    )
+    .into_bytes();
+    for (p, c) in scan.points.iter().zip(&scan.rgb) {
+        p.iter().for_each(|v| out.extend(v.to_le_bytes()));
+        for v in c {
+            if sixteen {
+                out.extend(v.to_le_bytes());
+            } else {
+                out.push((v >> 8) as u8);
+            }
+        }
+    }
+    out
+}
+
 #[test]
-fn displayed_colours_match_the_srgb_field_of_las_laz_and_e57() {
+fn displayed_colours_match_the_srgb_field_of_las_laz_e57_and_ply() {
     use e57::{RecordDataType, RecordValue};
     let dir = tempfile::tempdir().unwrap();
     let scan = sphere_scan(8000, 9, UTM, [UTM[0] - 50.0, UTM[1] - 50.0, 200.0]);
@@ -145,6 +169,8 @@ fn displayed_colours_match_the_srgb_field_of_las_laz_and_e57() {
         ("las-16bit.las", las_bytes(&scan, &las12)),
         ("las-8bit-in-16.las", las_bytes(&eight, &las12)),
         ("laz-16bit.laz", las_bytes(&scan, &laz14)),
+        ("ply-8bit.ply", ply_bytes(&scan, false)),
+        ("ply-16bit.ply", ply_bytes(&scan, true)),
         (
             "e57-16bit.e57",
             e57_bytes(&scan, 2, E57Coords::Cartesian, None),

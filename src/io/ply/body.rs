@@ -1,6 +1,7 @@
 //! PLY body sources: the binary byte stream and the ASCII token stream, both read through one
 //! fixed-size chunk buffer from any [`Read`] (a file or an in-memory slice). Memory O(chunk).
 
+use super::ROW;
 use std::io::Read;
 use std::path::Path;
 
@@ -36,7 +37,7 @@ pub(super) trait Body {
         &mut self,
         size: usize,
         fields: &[Field],
-        row: &mut [f64; 6],
+        row: &mut [f64; ROW],
         at: At,
     ) -> Result<bool, IoError>;
 }
@@ -177,7 +178,7 @@ impl<R: Read> Body for BinBody<'_, R> {
         &mut self,
         size: usize,
         fields: &[Field],
-        row: &mut [f64; 6],
+        row: &mut [f64; ROW],
         at: At,
     ) -> Result<bool, IoError> {
         let big = self.big;
@@ -287,7 +288,7 @@ impl<R: Read> Body for AsciiBody<'_, R> {
         &mut self,
         _size: usize,
         _fields: &[Field],
-        _row: &mut [f64; 6],
+        _row: &mut [f64; ROW],
         _at: At,
     ) -> Result<bool, IoError> {
         Ok(false)

@@ -63,6 +63,17 @@ impl Scalar {
         }
     }
 
+    /// The value that stands for full intensity when a colour has this type: the largest value
+    /// of an integer type of 8 or 16 bits (255, 65535; signed ones too, as files write them),
+    /// 1 for floating point, 255 for wider integers (the common 8-bit values written as int).
+    pub(super) fn full_scale(self) -> f64 {
+        match self {
+            Scalar::I16 | Scalar::U16 => 65535.0,
+            Scalar::F32 | Scalar::F64 => 1.0,
+            _ => 255.0,
+        }
+    }
+
     /// Decodes `b` (exactly `self.size()` bytes).
     pub(super) fn decode(self, b: &[u8], big: bool) -> f64 {
         fn arr<const N: usize>(b: &[u8], big: bool) -> [u8; N] {

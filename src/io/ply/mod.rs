@@ -1,5 +1,8 @@
-//! Stanford PLY reader (own parser): header, then the `vertex` element as points (x, y, z and
-//! optional nx, ny, nz) and, for meshes, the `face` element's index lists (fan-triangulated).
+//! Stanford PLY reader (own parser): header, then the `vertex` element as points (x, y, z,
+//! optional nx, ny, nz and optional red, green, blue) and, for meshes, the `face` element's index
+//! lists (fan-triangulated). Colours are scaled to [0, 1] by their type's range (8-bit / 255,
+//! 16-bit / 65535, floating point as stored, clamped) and kept as stored (sRGB, the scanners'
+//! convention).
 //!
 //! Handles `ascii`, `binary_little_endian` and `binary_big_endian`, every scalar type under both
 //! naming schemes, any property order, list properties and unrelated elements in any position, and
@@ -46,12 +49,27 @@ enum Want {
     Mesh,
 }
 
-/// What [`walk::walk`] keeps: the vertex element's index, its column slots, and the target.
+/// Values of a vertex record kept: x, y, z, nx, ny, nz, red, green, blue.
+pub(super) const ROW: usize = 9;
+
+/// What [`walk::walk`] keeps: the vertex element's index, its column slots, the colour scale
+/// (each channel's full-scale value, when the vertices carry red, green and blue) and the target.
 struct Plan<'a> {
     vertex: usize,
     slots: &'a [Option<usize>],
     has_normals: bool,
+    color_scale: Option<[f64; 3]>,
     want: Want,
+}
+
+/// The columns of the vertex element and what they hold.
+struct VertexColumns {
+    /// Per property: its slot in the record row ([`ROW`]), `None` = ignored.
+    slots: Vec<Option<usize>>,
+    /// Whether nx, ny, nz are all present.
+    normals: bool,
+    /// Full-scale value of red, green and blue when all three are present.
+    color_scale: Option<[f64; 3]>,
 }
 
 /// Reads the `vertex` element of a PLY stream as a point cloud (other elements skipped).
@@ -120,8 +138,8 @@ pub(crate) fn read_ply_mesh(
 pub(crate) fn peek_vertices<R: BufRead>(mut r: R, src: &Path) -> Result<(u64, bool), IoError> {
     let (h, _) = read_header(&mut r, src)?;
     let vi = vertex_element(&h, src)?;
-    let (_, has_normals) = vertex_slots(&h.elements[vi], src)?;
-    Ok((h.elements[vi].count, has_normals))
+    let cols = vertex_slots(&h.elements[vi], src)?;
+    Ok((h.elements[vi].count, cols.normals))
 }
 
 fn vertex_element(h: &Header, src: &Path) -> Result<usize, IoError> {
@@ -135,18 +153,22 @@ fn vertex_element(h: &Header, src: &Path) -> Result<usize, IoError> {
         })
 }
 
-/// Column slots of the vertex element: 0..3 = xyz, 3..6 = normals, `None` = ignored.
-fn vertex_slots(el: &Element, src: &Path) -> Result<(Vec<Option<usize>>, bool), IoError> {
-    let names: [&[&str]; 6] = [
+/// Column slots of the vertex element: 0..3 = xyz, 3..6 = normals, 6..9 = colour.
+fn vertex_slots(el: &Element, src: &Path) -> Result<VertexColumns, IoError> {
+    let names: [&[&str]; ROW] = [
         &["x"],
         &["y"],
         &["z"],
         &["nx", "normal_x"],
         &["ny", "normal_y"],
         &["nz", "normal_z"],
+        &["red", "r", "diffuse_red"],
+        &["green", "g", "diffuse_green"],
+        &["blue", "b", "diffuse_blue"],
     ];
     let mut slots = vec![None; el.props.len()];
-    let mut found = [false; 6];
+    let mut found = [false; ROW];
+    let mut scale = [1.0f64; 3];
     for (i, p) in el.props.iter().enumerate() {
         if !matches!(p.kind, PropKind::Scalar(_)) {
             continue;
@@ -157,6 +179,9 @@ fn vertex_slots(el: &Element, src: &Path) -> Result<(Vec<Option<usize>>, bool), 
         if let Some(s) = slot.filter(|&s| !found[s]) {
             found[s] = true;
             slots[i] = Some(s);
+            if let (Some(c), PropKind::Scalar(t)) = (s.checked_sub(6), p.kind) {
+                scale[c] = t.full_scale();
+            }
         }
     }
     if let Some(miss) = (0..3).find(|&s| !found[s]) {
@@ -166,14 +191,23 @@ fn vertex_slots(el: &Element, src: &Path) -> Result<(Vec<Option<usize>>, bool), 
             field: names[miss][0].to_string(),
         });
     }
-    let normals = found[3..].iter().all(|&f| f);
-    if !normals {
-        slots
-            .iter_mut()
-            .filter(|s| s.is_some_and(|k| k >= 3))
-            .for_each(|s| *s = None);
+    let normals = found[3..6].iter().all(|&f| f);
+    let colors = found[6..].iter().all(|&f| f);
+    for s in slots.iter_mut() {
+        let drop = match *s {
+            Some(3..6) => !normals,
+            Some(6..) => !colors,
+            _ => false,
+        };
+        if drop {
+            *s = None;
+        }
     }
-    Ok((slots, normals))
+    Ok(VertexColumns {
+        slots,
+        normals,
+        color_scale: colors.then_some(scale),
+    })
 }
 
 /// Fails fast when the body is shorter than the header's elements need at minimum.
@@ -224,7 +258,11 @@ fn read_ply_into<R: BufRead>(
             limit: limits.max_points,
         });
     }
-    let (slots, has_normals) = vertex_slots(&h.elements[vi], src)?;
+    let VertexColumns {
+        slots,
+        normals: has_normals,
+        color_scale,
+    } = vertex_slots(&h.elements[vi], src)?;
     check_body_size(&h, len.saturating_sub(header_len), src)?;
     if count == 0 {
         return Err(IoError::Empty {
@@ -241,6 +279,7 @@ fn read_ply_into<R: BufRead>(
         vertex: vi,
         slots: &slots,
         has_normals,
+        color_scale,
         want,
     };
     let triangles = match h.encoding {

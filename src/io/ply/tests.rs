@@ -185,6 +185,9 @@ fn round_trip_all_encodings_types_and_layouts() {
                     (false, None) => {}
                     other => panic!("{enc} {ty} {mask}: normals {:?}", other.0),
                 }
+                // The extras carry red, green and blue as 8-bit 200.
+                let want = s.extras.then(|| vec![[200.0f32 / 255.0; 3]; pts.len()]);
+                assert_eq!(pc.colors, want, "{enc} {ty} {mask}");
                 let mesh =
                     read_ply_mesh(&bytes, &ReadLimits::default(), Path::new("t.ply")).unwrap();
                 assert_eq!(
@@ -360,4 +363,44 @@ fn mesh_faces_are_fanned_and_validated() {
     let bad = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n3 0 1 3\n";
     let e = read_ply_mesh(bad, &ReadLimits::default(), Path::new("q.ply")).unwrap_err();
     assert!(matches!(e, IoError::Invalid { .. }), "{e}");
+}
+
+/// A PLY of `values` as red, green, blue of type `ty` (and `channels` of them), ASCII.
+fn colored_ply(ty: &str, channels: &[&str], values: &[[f64; 3]]) -> Vec<u8> {
+    let mut h = format!("ply\nformat ascii 1.0\nelement vertex {}\n", values.len());
+    h.push_str("property float x\nproperty float y\nproperty float z\n");
+    channels
+        .iter()
+        .for_each(|c| h.push_str(&format!("property {ty} {c}\n")));
+    h.push_str("end_header\n");
+    for (i, v) in values.iter().enumerate() {
+        h.push_str(&format!("{i} 0 0"));
+        (0..channels.len()).for_each(|k| h.push_str(&format!(" {}", v[k])));
+        h.push('\n');
+    }
+    h.into_bytes()
+}
+
+#[test]
+fn colours_are_scaled_by_their_type_and_need_all_three_channels() {
+    let rgb = ["red", "green", "blue"];
+    let read = |bytes: Vec<u8>| {
+        parse_point_cloud(&bytes, PointFormat::Ply, &ReadLimits::default())
+            .unwrap()
+            .colors
+    };
+    let eight = read(colored_ply("uchar", &rgb, &[[0.0, 51.0, 255.0], [255.0, 0.0, 102.0]]));
+    assert_eq!(eight, Some(vec![[0.0, 0.2, 1.0], [1.0, 0.0, 0.4]]));
+    let sixteen = read(colored_ply("ushort", &rgb, &[[65535.0, 0.0, 13107.0]]));
+    assert_eq!(sixteen, Some(vec![[1.0, 0.0, 0.2]]));
+    // Floating point as stored, clamped to [0, 1].
+    let float = read(colored_ply("float", &rgb, &[[0.25, 1.5, -0.5]]));
+    assert_eq!(float, Some(vec![[0.25, 1.0, 0.0]]));
+    // The short names and the diffuse_ names of other writers.
+    let short = read(colored_ply("uchar", &["r", "g", "b"], &[[255.0, 0.0, 0.0]]));
+    assert_eq!(short, Some(vec![[1.0, 0.0, 0.0]]));
+    let diffuse = ["diffuse_red", "diffuse_green", "diffuse_blue"];
+    assert_eq!(read(colored_ply("uchar", &diffuse, &[[0.0, 255.0, 0.0]])), Some(vec![[0.0, 1.0, 0.0]]));
+    // Red and green alone are no colour.
+    assert_eq!(read(colored_ply("uchar", &rgb[..2], &[[1.0, 2.0, 0.0]])), None);
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::body::{At, Body, Field};
 use super::header::{Element, Header, PropKind, Scalar};
-use super::{Plan, Want};
+use super::{Plan, ROW, Want};
 use crate::io::IoError;
 use crate::io::stream::PointSink;
 
@@ -67,7 +67,7 @@ fn read_vertices<B: Body>(
             el: &el.name,
             record,
         };
-        let mut row = [0.0f64; 6];
+        let mut row = [0.0f64; ROW];
         let whole = match &layout {
             Some((size, fields)) => b.fixed_record(*size, fields, &mut row, at)?,
             None => false,
@@ -77,6 +77,9 @@ fn read_vertices<B: Body>(
         }
         let normal = plan.has_normals.then_some([row[3], row[4], row[5]]);
         out.push([row[0], row[1], row[2]], normal)?;
+        if let Some(scale) = plan.color_scale {
+            out.push_color([0, 1, 2].map(|k| (row[6 + k] / scale[k]).clamp(0.0, 1.0) as f32));
+        }
     }
     Ok(())
 }
@@ -86,7 +89,7 @@ fn read_vertex_values<B: Body>(
     b: &mut B,
     el: &Element,
     slots: &[Option<usize>],
-    row: &mut [f64; 6],
+    row: &mut [f64; ROW],
     at: At,
 ) -> Result<(), IoError> {
     for (p, slot) in el.props.iter().zip(slots) {
