@@ -11,6 +11,7 @@ use crate::geometry::{Aabb, Point3, PointCloud, normalized};
 use crate::spatial::{IndexKind, SpatialError, build_index};
 use rayon::prelude::*;
 
+pub(crate) mod denoise;
 pub(crate) mod outliers;
 pub(crate) mod strays;
 
@@ -51,6 +52,9 @@ pub struct CleanStats {
     /// Points of a noisy cloud removed as strays off the surface ([`strays`]).
     #[serde(default)]
     pub strays_removed: usize,
+    /// Points of a noisy cloud moved onto their neighbourhood's quadric ([`denoise`]).
+    #[serde(default)]
+    pub denoised: usize,
 }
 
 /// Why a cloud cannot be reconstructed.
@@ -192,6 +196,7 @@ pub fn clean_cloud(
         },
         outliers_removed: 0,
         strays_removed: 0,
+        denoised: 0,
     };
     check_degenerate(&points, normals.is_some())?;
     // Colours and intensity follow the kept points (a merged duplicate keeps the first's).

@@ -61,6 +61,15 @@ pub fn fit_field(
     };
     let t = Instant::now();
     let normals_reoriented = reorient_inconsistent_normals(&mut clean, &points, index.as_ref());
+    // Denoised after the normals: they are estimated and oriented on the measured points.
+    if noise.smooth && params.smoothing != crate::params::Smoothing::Lambda(0.0) {
+        let moved = crate::clean::denoise::denoise(&points, noise.sigma, |p, k, out| {
+            index.nearest_k(p, k, out)
+        });
+        clean_stats.denoised = (moved.iter().zip(&points)).filter(|(a, b)| a != b).count();
+        points = moved;
+        index = Arc::from(build_index(&points, params.index, params.leaf_size)?);
+    }
     let resolved = params.resolved_for(&noise);
     let params = &resolved;
     let count = params.levels;

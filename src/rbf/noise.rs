@@ -23,6 +23,10 @@ const SMALL_K: usize = 12;
 const LARGE_K: usize = 48;
 /// Residual ratio (k = 48 over k = 12) below which the residual is taken for noise.
 pub const FLAT_RATIO: f64 = 2.0;
+/// Residual ratio below which a noisy cloud counts as smooth at the scale of 48 neighbours (pure
+/// noise on a smooth surface: 1.11–1.15; noisy statues 1.33–1.38), so that its points are
+/// denoised by local quadrics ([`crate::clean::denoise`]) before the fit.
+pub const SMOOTH_RATIO: f64 = 1.25;
 /// Noise below this fraction of the spacing is left to interpolation.
 pub const NOISE_FLOOR: f64 = 0.05;
 /// λ per unit of σ / h.
@@ -41,6 +45,10 @@ pub struct NoiseEstimate {
     pub scale_ratio: f64,
     /// Whether the residual is taken for noise.
     pub noisy: bool,
+    /// Whether the cloud is noisy and smooth at 48 neighbours (`scale_ratio` below
+    /// [`SMOOTH_RATIO`]): its points are projected onto local quadrics before the fit.
+    #[serde(default)]
+    pub smooth: bool,
     /// The smoothing λ this estimate chooses (0 = interpolate).
     pub lambda: f64,
 }
@@ -69,6 +77,7 @@ pub fn estimate_noise(
         sigma_over_spacing: rel,
         scale_ratio: ratio,
         noisy,
+        smooth: noisy && ratio < SMOOTH_RATIO,
         lambda: if noisy {
             (LAMBDA_PER_NOISE * rel).min(MAX_LAMBDA)
         } else {
@@ -111,46 +120,90 @@ pub(crate) fn median_quadric_residual(neighbourhoods: impl Iterator<Item = Vec<P
 /// Unbiased RMS residual of the least-squares height-field quadric through `nb` (≥ 8 points) in
 /// its PCA frame; `None` when degenerate.
 fn quadric_residual(nb: &[Point3]) -> Option<f64> {
-    if nb.len() < 8 {
-        return None;
-    }
-    let p = pca(nb);
-    let mut m = [[0.0f64; 7]; 6];
-    // Tangent coordinates scaled to about [−1, 1] for conditioning (the residual stays in w's units).
-    let reach = nb
-        .iter()
-        .map(|q| crate::geometry::dist2(*q, p.centroid))
-        .fold(0.0, f64::max)
-        .sqrt();
-    if reach.is_nan() || reach <= 0.0 {
-        return None;
-    }
-    let rows: Vec<([f64; 6], f64)> = nb
-        .iter()
-        .map(|q| {
-            let d = sub(*q, p.centroid);
-            let (u, v) = (dot(d, p.axes[0]) / reach, dot(d, p.axes[1]) / reach);
-            let w = dot(d, p.axes[2]);
-            ([1.0, u, v, u * u, u * v, v * v], w)
-        })
-        .collect();
-    for (row, w) in &rows {
-        for a in 0..6 {
-            for b in 0..6 {
-                m[a][b] += row[a] * row[b];
-            }
-            m[a][6] += row[a] * w;
+    Some(LocalQuadric::fit(nb)?.rms_residual(nb))
+}
+
+/// The least-squares height field `w = a + b u + c v + d u² + e uv + f v²` of a neighbourhood
+/// over its PCA plane (`u`, `v` along the two widest axes, scaled by the neighbourhood's reach,
+/// `w` along the normal axis, in the points' units).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LocalQuadric {
+    centroid: Point3,
+    axes: [Point3; 3],
+    reach: f64,
+    coef: [f64; 6],
+}
+
+impl LocalQuadric {
+    /// Fits `nb` (at least 8 points); `None` when degenerate (coincident points, a line).
+    pub(crate) fn fit(nb: &[Point3]) -> Option<LocalQuadric> {
+        if nb.len() < 8 {
+            return None;
         }
+        let p = pca(nb);
+        // Tangent coordinates scaled to about [−1, 1] for conditioning (w stays in the points' units).
+        let reach = nb
+            .iter()
+            .map(|q| crate::geometry::dist2(*q, p.centroid))
+            .fold(0.0, f64::max)
+            .sqrt();
+        if reach.is_nan() || reach <= 0.0 {
+            return None;
+        }
+        let mut q = LocalQuadric {
+            centroid: p.centroid,
+            axes: p.axes,
+            reach,
+            coef: [0.0; 6],
+        };
+        let mut m = [[0.0f64; 7]; 6];
+        for point in nb {
+            let (row, w) = q.row(*point);
+            for a in 0..6 {
+                for b in 0..6 {
+                    m[a][b] += row[a] * row[b];
+                }
+                m[a][6] += row[a] * w;
+            }
+        }
+        q.coef = solve6(m)?;
+        Some(q)
     }
-    let coef = solve6(m)?;
-    let rss: f64 = rows
-        .iter()
-        .map(|(row, w)| {
-            let fit: f64 = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
-            (w - fit) * (w - fit)
-        })
-        .sum();
-    Some((rss / (nb.len() - 6) as f64).sqrt())
+
+    /// The monomials of `p`'s tangent coordinates and its height over the plane.
+    fn row(&self, p: Point3) -> ([f64; 6], f64) {
+        let d = sub(p, self.centroid);
+        let (u, v) = (
+            dot(d, self.axes[0]) / self.reach,
+            dot(d, self.axes[1]) / self.reach,
+        );
+        ([1.0, u, v, u * u, u * v, v * v], dot(d, self.axes[2]))
+    }
+
+    /// `p`'s height over the plane and the quadric's height at `p`'s tangent coordinates.
+    pub(crate) fn heights(&self, p: Point3) -> (f64, f64) {
+        let (row, w) = self.row(p);
+        (w, row.iter().zip(&self.coef).map(|(a, b)| a * b).sum())
+    }
+
+    /// Unbiased RMS residual `√(Σ r² / (n − 6))` of `nb` (the fitted points, more than 6).
+    pub(crate) fn rms_residual(&self, nb: &[Point3]) -> f64 {
+        let rss: f64 = nb
+            .iter()
+            .map(|p| {
+                let (w, fit) = self.heights(*p);
+                (w - fit) * (w - fit)
+            })
+            .sum();
+        (rss / (nb.len().saturating_sub(6).max(1)) as f64).sqrt()
+    }
+
+    /// `p` moved along the normal axis onto the quadric.
+    pub(crate) fn project(&self, p: Point3) -> Point3 {
+        let (w, fit) = self.heights(p);
+        let n = self.axes[2];
+        [0, 1, 2].map(|k| p[k] + (fit - w) * n[k])
+    }
 }
 
 /// Gaussian elimination with partial pivoting on a 6×6 augmented system.
