@@ -348,6 +348,14 @@ pub struct PolygonizeReport {
     pub floaters_removed: usize,
     /// Triangles in those components.
     pub floater_triangles: usize,
+    /// Pieces of an open surface dropped as fringes: no vertex more than 2 support radii inside
+    /// their border (silhouette and grazing-view strips of range scans; `--min-support 0`
+    /// keeps them).
+    #[serde(default)]
+    pub fringes_removed: usize,
+    /// Triangles in those pieces.
+    #[serde(default)]
+    pub fringe_triangles: usize,
     /// Connected components dropped by `--min-component` (floaters).
     pub small_components_removed: usize,
     /// Triangles in those components.

@@ -13,6 +13,7 @@ pub(crate) mod color;
 pub mod compare;
 mod distance;
 pub mod floaters;
+pub(crate) mod fringes;
 pub(crate) mod handles;
 pub(crate) mod incidence;
 pub(crate) mod lod;

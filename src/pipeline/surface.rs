@@ -145,6 +145,11 @@ pub(crate) fn extract_surface(
         let reach = params.border_reach * fit.support_radius;
         s.peeled_triangles =
             crate::mesh::peel::peel_border(&mut mesh, &fit.points, reach, fit.support_radius);
+        if params.min_support > 0.0 {
+            let (drop, n) = crate::mesh::fringes::fringes(&mesh, fit.support_radius);
+            s.fringes_removed = n;
+            s.fringe_triangles = trim::remove_triangles(&mut mesh, &drop);
+        }
     }
     let t = std::time::Instant::now();
     simplify_to_chord_error(fit, params, &mut mesh, &mut s);
