@@ -101,6 +101,12 @@ pub enum ReconError {
     Cancelled,
 }
 
+impl From<crate::io::IoError> for ReconError {
+    fn from(e: crate::io::IoError) -> Self {
+        ReconError::Read(e)
+    }
+}
+
 /// Why the out-of-core store of intermediate results failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

@@ -42,7 +42,9 @@ pub struct Report {
 /// One task of a distributed task-graph run (report `tasks[]`).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct TaskReport {
-    /// `prepare` (the `start` task that planned the graph), `block <b>`, `region <r>` or `merge`.
+    /// `prepare` (the `start` task that planned the graph), `block <b>`, `region <r>`, `merge`, or
+    /// one of prepare's pass tasks: `survey`, `route` (the input read whole), `survey range <r>`,
+    /// `sample range <r>`, `route range <r>` (read by byte ranges), `clean-up`.
     pub task: String,
     /// Id of the worker that ran it (the last delivery's, when it ran more than once).
     pub worker: String,

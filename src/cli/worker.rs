@@ -113,6 +113,11 @@ pub struct WorkerArgs {
     /// such a job [default: 500000].
     #[arg(long, value_name = "POINTS")]
     pub spread_points: Option<u64>,
+    /// MiB per byte range of the input when this worker prepares a job's task graph: the survey
+    /// and routing run one task per range for binary PLY, uncompressed LAS and XYZ/PTS/CSV text
+    /// (docs/distributed.md, "Prepare by byte ranges"); 0 reads the input whole [default: 64].
+    #[arg(long, value_name = "MIB")]
+    pub range_mib: Option<f64>,
 }
 
 /// Runs the worker until it is stopped.
@@ -137,10 +142,16 @@ pub fn run(a: &WorkerArgs) -> Result<()> {
         Some(n) => n,
         None => crate::dist::SPREAD_POINTS,
     };
+    let split = match a.range_mib {
+        Some(m) if m <= 0.0 => crate::pipeline::tiled::InputSplit::Whole,
+        Some(m) => crate::pipeline::tiled::InputSplit::Bytes(((m * 1048576.0) as u64).max(1)),
+        None => crate::pipeline::tiled::InputSplit::default(),
+    };
     let params = crate::dist::worker::WorkerParams {
         nats,
         concurrency,
         spread_points,
+        split,
     };
     rt.block_on(crate::dist::worker::run_worker(&params))
         .context("worker")

@@ -67,6 +67,8 @@ pub struct Ctx {
     /// Points from which a job within its budget is split when another worker is idle
     /// ([`super::spread`]; `u64::MAX`: never).
     pub spread_points: u64,
+    /// How prepare reads a job's input: by byte ranges (the default), or whole.
+    pub split: tiled::InputSplit,
     /// The last plans decoded, by job (a plan rebuilds the far field: worth keeping).
     plans: Mutex<VecDeque<(Uuid, Arc<Plan>)>>,
 }
@@ -85,6 +87,7 @@ impl Ctx {
             worker,
             concurrency,
             spread_points: super::spread::SPREAD_POINTS,
+            split: tiled::InputSplit::default(),
             plans: Mutex::new(VecDeque::new()),
         }
     }
@@ -391,13 +394,14 @@ fn prepare_graph(
     params.validate().map_err(|e| recon_error(e.into()))?;
     let options = TiledOptions {
         worker: ctx.worker.clone(),
+        split: ctx.split,
         ..Default::default()
     };
     let written = Arc::new(Mutex::new(Vec::new()));
     let store = ctx.recording_store(job, Some(Arc::clone(&written)));
     let prepared = prepare::prepare(input, params, &options, est.block_points, &store, progress);
-    let plan = match prepared {
-        Ok(plan) => plan,
+    let (plan, prepare_tasks) = match prepared {
+        Ok(prepared) => prepared,
         Err(e) => {
             // Cancelled or failed half-way: no graph state names these values yet.
             let keys = std::mem::take(&mut *written.lock().unwrap_or_else(|e| e.into_inner()));
@@ -416,7 +420,9 @@ fn prepare_graph(
         regions: vec![false; plan.grid.regions.len()],
         prepare_s: t.elapsed().as_secs_f64(),
         regions_started_ms: 0,
-        tasks: vec![timing("prepare", &ctx.worker, started_ms)],
+        tasks: (prepare_tasks.into_iter())
+            .chain([timing("prepare", &ctx.worker, started_ms)])
+            .collect(),
     };
     ctx.block_on(records::create(&ctx.res.jobs, &dag_key(job), &dag))?;
     if ended(ctx, job)? {

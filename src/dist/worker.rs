@@ -33,6 +33,8 @@ pub struct WorkerParams {
     /// Points from which a job within its memory budget is split into block tasks when another
     /// worker is idle ([`super::spread`]).
     pub spread_points: u64,
+    /// How this worker's prepare reads a job's input (by byte ranges, or whole).
+    pub split: crate::pipeline::tiled::InputSplit,
 }
 
 /// Runs the worker until the process is stopped.
@@ -54,6 +56,7 @@ pub async fn run_worker(p: &WorkerParams) -> Result<(), DistError> {
         p.concurrency.max(1),
     );
     ctx.spread_points = p.spread_points;
+    ctx.split = p.split;
     let ctx = Arc::new(ctx);
     let slots = Arc::new(tokio::sync::Semaphore::new(p.concurrency.max(1)));
     let running = Arc::new(AtomicUsize::new(0));

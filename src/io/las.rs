@@ -390,3 +390,66 @@ fn crs_of(h: &las::Header) -> Option<String> {
     }
     Some(crs)
 }
+
+/// The point records of an uncompressed LAS file, for reading them by byte ranges
+/// ([`crate::io::split`]): record `k` starts at `body_start + k · record_bytes`.
+#[derive(Debug, Clone)]
+pub(crate) struct LasRecords {
+    /// Byte offset of record 0.
+    pub body_start: u64,
+    /// Bytes per record.
+    pub record_bytes: usize,
+    /// Records the header declares.
+    pub count: u64,
+    header: las::Header,
+}
+
+impl LasRecords {
+    /// Decodes whole records `raw` (a multiple of `record_bytes`) into `out`, with the
+    /// whole-file reader's arithmetic (`raw · scale + offset`).
+    pub(crate) fn decode(&self, raw: &[u8], out: &mut Vec<[f64; 3]>) {
+        let n = raw.len() / self.record_bytes.max(1);
+        let mut pd = PointDataBuilder::new().for_header(&self.header).build();
+        pd.resize_for(n)
+            .copy_from_slice(&raw[..n * self.record_bytes]);
+        let xyz = pd.x().zip(pd.y()).zip(pd.z());
+        out.extend(xyz.map(|((x, y), z)| [x, y, z]));
+    }
+}
+
+/// The records of the LAS stream `r` (`len` bytes) when they can be read by byte ranges (`None`
+/// for LAZ, whose records are compressed in chunks). Refuses what the whole-file reader refuses
+/// before its body: the point limit, a truncated body, no points.
+pub(crate) fn fixed_records<R: Read + Seek>(
+    mut r: R,
+    len: u64,
+    limits: &ReadLimits,
+    src: &Path,
+) -> Result<Option<LasRecords>, IoError> {
+    let c = precheck(&mut r, len, src)?;
+    if c.compressed {
+        return Ok(None);
+    }
+    if c.points > limits.max_points as u64 {
+        return Err(IoError::TooManyPoints {
+            path: src.to_path_buf(),
+            declared: c.points,
+            limit: limits.max_points,
+        });
+    }
+    check_body(&c, len, src)?;
+    if c.points == 0 {
+        return Err(IoError::Empty {
+            path: src.to_path_buf(),
+            what: "LAS header declares 0 points".into(),
+        });
+    }
+    r.seek(SeekFrom::Start(0)).map_err(|e| read_err(src, e))?;
+    let header = las::Header::new(&mut r).map_err(|e| invalid(src, e.to_string()))?;
+    Ok(Some(LasRecords {
+        body_start: c.offset_to_points,
+        record_bytes: c.record_len as usize,
+        count: c.points,
+        header,
+    }))
+}

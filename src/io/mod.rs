@@ -21,6 +21,7 @@ mod obj;
 mod off;
 mod ply;
 mod snap;
+pub(crate) mod split;
 mod stream;
 mod text;
 mod write;

@@ -30,20 +30,20 @@ use crate::geometry::PointCloud;
 
 /// Column indices of the used fields.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Columns {
-    xyz: [usize; 3],
-    normals: Option<[usize; 3]>,
+pub(super) struct Columns {
+    pub(super) xyz: [usize; 3],
+    pub(super) normals: Option<[usize; 3]>,
 }
 
 impl Columns {
-    fn min_tokens(&self) -> usize {
+    pub(super) fn min_tokens(&self) -> usize {
         let m = self.xyz.iter().max().copied().unwrap_or(0);
         self.normals
             .map_or(m, |n| m.max(n.iter().max().copied().unwrap_or(0)))
             + 1
     }
 
-    fn from_count(n: usize) -> Columns {
+    pub(super) fn from_count(n: usize) -> Columns {
         Columns {
             xyz: [0, 1, 2],
             normals: (n == 6).then_some([3, 4, 5]),
@@ -51,12 +51,12 @@ impl Columns {
     }
 }
 
-fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
+pub(super) fn tokens(line: &[u8]) -> impl Iterator<Item = &[u8]> {
     line.split(|&c| c.is_ascii_whitespace() || c == b',' || c == b';')
         .filter(|t| !t.is_empty())
 }
 
-fn parse_f64(t: &[u8]) -> Option<f64> {
+pub(super) fn parse_f64(t: &[u8]) -> Option<f64> {
     std::str::from_utf8(t).ok()?.parse::<f64>().ok()
 }
 
@@ -86,7 +86,11 @@ fn field_of(name: &[u8]) -> Option<usize> {
     None
 }
 
-fn columns_from_header(names: &[&[u8]], fmt: &'static str, src: &Path) -> Result<Columns, IoError> {
+pub(super) fn columns_from_header(
+    names: &[&[u8]],
+    fmt: &'static str,
+    src: &Path,
+) -> Result<Columns, IoError> {
     let mut found: [Option<usize>; 6] = [None; 6];
     for (i, n) in names.iter().enumerate() {
         if let Some(f) = field_of(n) {
@@ -170,7 +174,7 @@ impl Sink<'_, '_> {
 }
 
 /// The point count of a PTS-style count line (a single non-negative integer), if `toks` is one.
-fn count_line(toks: &[&[u8]]) -> Option<u64> {
+pub(super) fn count_line(toks: &[&[u8]]) -> Option<u64> {
     match toks {
         [t] => std::str::from_utf8(t).ok()?.parse::<u64>().ok(),
         _ => None,
@@ -231,7 +235,7 @@ fn next_line<R: BufRead>(
 }
 
 /// A PTS count line's point count against the point limit and the memory budget.
-fn check_count_line(n: u64, limits: &ReadLimits, src: &Path) -> Result<(), IoError> {
+pub(super) fn check_count_line(n: u64, limits: &ReadLimits, src: &Path) -> Result<(), IoError> {
     if n > limits.max_points as u64 {
         return Err(IoError::TooManyPoints {
             path: src.to_path_buf(),
@@ -243,7 +247,7 @@ fn check_count_line(n: u64, limits: &ReadLimits, src: &Path) -> Result<(), IoErr
 }
 
 /// Longest text line accepted (bytes); a longer one is a parse error, not an unbounded buffer.
-const MAX_LINE: u64 = 16 << 20;
+pub(super) const MAX_LINE: u64 = 16 << 20;
 
 /// Reads XYZ / PTS / CSV text as described in the module docs from `r`, whose total size is
 /// `len` bytes (used to estimate the point count from the first 64 KiB).

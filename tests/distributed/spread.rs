@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 const WITHIN_MIB: &str = "128";
 /// The workers' threshold in these tests (the default is 500,000 points).
 const SPREAD: [&str; 2] = ["--spread-points", "10000"];
+/// The threshold and byte ranges of 128 KiB: the torus's 1.1 MB PLY is prepared in 9 ranges.
+const SPREAD_BY_RANGES: [&str; 4] = ["--spread-points", "10000", "--range-mib", "0.125"];
 const JOB: [&str; 4] = ["--max-memory-mib", WITHIN_MIB, "--resolution", "64"];
 
 /// The torus and its local run through the task graph at the same budget (`--out-of-core`).
@@ -70,13 +72,14 @@ fn assert_timeline(rep: &serde_json::Value) {
     assert!(cp > 0.0 && cp <= wall + 1e-3, "{path}");
 }
 
+/// The workers prepare by byte ranges, the local run reads the input whole: the same GLB.
 #[test]
 fn a_large_job_within_its_budget_spreads_over_idle_workers_with_the_local_graph_mesh() {
     let Some((tmp, nats)) = private_nats() else {
         return;
     };
     let dir = tmp.path();
-    let w1 = worker_with(&nats, dir, "w1", 1, &SPREAD);
+    let w1 = worker_with(&nats, dir, "w1", 1, &SPREAD_BY_RANGES);
     let (_api, a) = serve(&nats, dir, "api");
     let (cloud, local) = torus_and_local_graph_run(dir);
     wait_until(30, "w1 to wait for tasks", || {
@@ -91,7 +94,7 @@ fn a_large_job_within_its_budget_spreads_over_idle_workers_with_the_local_graph_
     assert!(!w1.log().contains("splitting the job"));
 
     // A second, idle worker: the job is split and equals the local graph run bit for bit.
-    let w2 = worker_with(&nats, dir, "w2", 1, &SPREAD);
+    let w2 = worker_with(&nats, dir, "w2", 1, &SPREAD_BY_RANGES);
     wait_until(30, "w2 to wait for tasks", || {
         w2.log().contains("waiting for tasks")
     });
@@ -105,6 +108,18 @@ fn a_large_job_within_its_budget_spreads_over_idle_workers_with_the_local_graph_
     assert_eq!(rep["mesh"]["watertight"], true);
     assert_eq!(rep["mesh"]["genus"], 1);
     assert_timeline(&rep);
+    let local_tasks = lrep["tasks"].as_array().unwrap();
+    assert!(
+        local_tasks.iter().any(|t| t["task"] == "route"),
+        "read whole"
+    );
+    let tasks = rep["tasks"].as_array().unwrap();
+    for pass in ["survey range ", "sample range ", "route range "] {
+        let n = (tasks.iter())
+            .filter(|t| t["task"].as_str().unwrap().starts_with(pass))
+            .count();
+        assert_eq!(n, 9, "{pass}tasks");
+    }
     let ran: std::collections::BTreeSet<&str> = (rep["tasks"].as_array().unwrap().iter())
         .map(|t| t["worker"].as_str().unwrap())
         .collect();

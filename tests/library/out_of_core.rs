@@ -7,7 +7,9 @@ use crate::common;
 use rbfsurf::geometry::TriMesh;
 use rbfsurf::geometry::synthetic::Shape;
 use rbfsurf::params::ReconParams;
-use rbfsurf::pipeline::tiled::{StoreKind, TiledOptions, reconstruct_tiled};
+use rbfsurf::pipeline::tiled::{
+    InputSplit, StoreKind, TiledInput, TiledOptions, reconstruct_tiled, reconstruct_tiled_from,
+};
 use rbfsurf::progress::NoProgress;
 
 fn options(store: StoreKind, region_cells: usize, concurrency: usize) -> TiledOptions {
@@ -17,6 +19,7 @@ fn options(store: StoreKind, region_cells: usize, concurrency: usize) -> TiledOp
         region_cells,
         concurrency: Some(concurrency),
         worker: "test".into(),
+        split: InputSplit::Whole,
     }
 }
 
@@ -215,6 +218,46 @@ fn a_streamed_torus_under_a_tiny_budget_is_closed_genus_one_and_close_to_the_in_
     assert!(d.chamfer_rel < 1e-4, "{d:?}");
     let err = common::max_vertex_error(&streamed, |p| shape.signed_distance(p));
     assert!(err < 0.01, "max vertex error {err}");
+}
+
+#[test]
+fn prepare_by_byte_ranges_gives_the_single_passes_mesh_bit_for_bit() {
+    let cloud = Shape::by_name("torus").unwrap().sample(12_000, 8);
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("torus.ply");
+    rbfsurf::io::write_points_ply(&ply, &cloud).unwrap();
+    let xyz = dir.path().join("torus.xyz");
+    let mut text = String::from("# x y z nx ny nz\n");
+    for (p, n) in cloud.points.iter().zip(cloud.normals.as_ref().unwrap()) {
+        let row = [p[0], p[1], p[2], n[0], n[1], n[2]].map(|v| v.to_string());
+        text.push_str(&row.join(" "));
+        text.push('\n');
+    }
+    std::fs::write(&xyz, text).unwrap();
+    let limits = rbfsurf::io::ReadLimits::default();
+    let params = ReconParams::default();
+    for path in [&ply, &xyz] {
+        let input = TiledInput::Stream(rbfsurf::io::StreamInput::File(path), &limits);
+        let run = |split: InputSplit| {
+            let options = TiledOptions {
+                split,
+                ..options(StoreKind::TempDir(None), 32, 2)
+            };
+            reconstruct_tiled_from(&input, &params, &options, &NoProgress).unwrap()
+        };
+        let whole = run(InputSplit::Whole);
+        let split = run(InputSplit::Bytes(16 << 10));
+        assert_eq!(split.mesh.vertices, whole.mesh.vertices, "{path:?}");
+        assert_eq!(split.mesh.triangles, whole.mesh.triangles, "{path:?}");
+        assert_eq!(split.mesh.normals, whole.mesh.normals, "{path:?}");
+        assert_eq!(split.report.input, whole.report.input, "{path:?}");
+        let routes = (split.report.tasks.iter())
+            .filter(|t| t.task.starts_with("route range") && t.worker == "test")
+            .count();
+        assert!(routes >= 20, "{path:?}: {routes} route tasks");
+        assert!(whole.report.tasks.iter().any(|t| t.task == "route"));
+        assert!(whole.report.blocks.len() >= 4 && whole.report.mesh.watertight);
+    }
 }
 
 #[test]

@@ -22,6 +22,7 @@ use std::path::Path;
 
 mod body;
 mod header;
+mod split;
 mod walk;
 
 #[cfg(test)]
@@ -29,6 +30,7 @@ mod stream_tests;
 #[cfg(test)]
 mod tests;
 
+pub(crate) use split::{PlyRecords, vertex_records};
 pub(crate) use walk::fan;
 
 use body::{AsciiBody, BinBody};

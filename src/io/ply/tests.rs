@@ -389,7 +389,11 @@ fn colours_are_scaled_by_their_type_and_need_all_three_channels() {
             .unwrap()
             .colors
     };
-    let eight = read(colored_ply("uchar", &rgb, &[[0.0, 51.0, 255.0], [255.0, 0.0, 102.0]]));
+    let eight = read(colored_ply(
+        "uchar",
+        &rgb,
+        &[[0.0, 51.0, 255.0], [255.0, 0.0, 102.0]],
+    ));
     assert_eq!(eight, Some(vec![[0.0, 0.2, 1.0], [1.0, 0.0, 0.4]]));
     let sixteen = read(colored_ply("ushort", &rgb, &[[65535.0, 0.0, 13107.0]]));
     assert_eq!(sixteen, Some(vec![[1.0, 0.0, 0.2]]));
@@ -400,7 +404,13 @@ fn colours_are_scaled_by_their_type_and_need_all_three_channels() {
     let short = read(colored_ply("uchar", &["r", "g", "b"], &[[255.0, 0.0, 0.0]]));
     assert_eq!(short, Some(vec![[1.0, 0.0, 0.0]]));
     let diffuse = ["diffuse_red", "diffuse_green", "diffuse_blue"];
-    assert_eq!(read(colored_ply("uchar", &diffuse, &[[0.0, 255.0, 0.0]])), Some(vec![[0.0, 1.0, 0.0]]));
+    assert_eq!(
+        read(colored_ply("uchar", &diffuse, &[[0.0, 255.0, 0.0]])),
+        Some(vec![[0.0, 1.0, 0.0]])
+    );
     // Red and green alone are no colour.
-    assert_eq!(read(colored_ply("uchar", &rgb[..2], &[[1.0, 2.0, 0.0]])), None);
+    assert_eq!(
+        read(colored_ply("uchar", &rgb[..2], &[[1.0, 2.0, 0.0]])),
+        None
+    );
 }

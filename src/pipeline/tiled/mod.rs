@@ -9,6 +9,9 @@
 //!   patches; write points/{b}                                             ─► piece/{r}
 //! ```
 //!
+//! Prepare's survey and partition passes run as one task per byte range of the input when its
+//! format splits ([`InputSplit`], [`ranges`]), with the single passes' result.
+//!
 //! Each task is a pure function of what it reads from the [`StoreKind`] store (in memory or a
 //! temporary directory) and writes one keyed result, so the executor is free to run tasks in any
 //! order, in parallel, again, or elsewhere. The local executor runs the block fits and the regions
@@ -29,12 +32,15 @@
 pub(crate) mod codec;
 pub(crate) mod graph;
 mod merge;
+mod patches;
 pub(crate) mod prepare;
+mod ranges;
 mod route;
 pub(crate) mod store;
 mod survey;
 mod tasks;
 
+pub use ranges::{DEFAULT_RANGE_BYTES, InputSplit};
 pub use store::StoreKind;
 pub use survey::TiledInput;
 
@@ -65,6 +71,8 @@ pub struct TiledOptions {
     pub concurrency: Option<usize>,
     /// The id the report gives this process's blocks (`blocks[].worker`).
     pub worker: String,
+    /// How prepare reads the input: by byte ranges of 64 MiB by default ([`InputSplit`]).
+    pub split: InputSplit,
 }
 
 impl Default for TiledOptions {
@@ -75,6 +83,7 @@ impl Default for TiledOptions {
             region_cells: 32,
             concurrency: None,
             worker: format!("local-{}", std::process::id()),
+            split: InputSplit::default(),
         }
     }
 }
@@ -214,7 +223,7 @@ pub fn reconstruct_tiled_from(
     let store = Store::open(&options.store)?;
     let mut timings = Timings::default();
     let t = Instant::now();
-    let plan =
+    let (plan, prepare_tasks) =
         pool.install(|| prepare::prepare(input, params, options, block_points, &store, progress))?;
     timings.clean = t.elapsed().as_secs_f64();
     let (block_reports, matrix) = fit_all(
@@ -231,7 +240,7 @@ pub fn reconstruct_tiled_from(
     timings.polygonize = t.elapsed().as_secs_f64();
     drop(store);
     progress.stage(Stage::Post);
-    finish(
+    let mut recon = finish(
         &plan,
         mesh,
         poly,
@@ -240,7 +249,9 @@ pub fn reconstruct_tiled_from(
         matrix,
         timings,
         start,
-    )
+    )?;
+    recon.report.tasks = prepare_tasks;
+    Ok(recon)
 }
 
 /// Run `task` for `0..n` on `pool`, results in order; the first error wins.

@@ -24,9 +24,11 @@
 //! nothing proportional to the cloud.
 
 use super::TiledOptions;
-use super::route;
+use super::patches;
+use super::ranges::Scan;
+use super::route::{self, Routing};
 use super::store::Store;
-use super::survey::{self, Survey, TiledInput};
+use super::survey::{Survey, TiledInput};
 use super::tasks::{GridPlan, block_key};
 use crate::clean::{CleanStats, check_degenerate};
 use crate::error::{ReconError, StoreError};
@@ -35,9 +37,9 @@ use crate::params::{Boundary, ReconParams};
 use crate::progress::{Progress, Stage};
 use crate::rbf::winding::WindingGrid;
 use crate::rbf::{
-    Carrier, CarrierKind, NoiseEstimate, SupportEstimate, estimate_noise, estimate_support,
-    plan_leaves,
+    Carrier, CarrierKind, NoiseEstimate, SupportEstimate, estimate_support, plan_leaves,
 };
+use crate::report::TaskReport;
 use crate::spatial::{IndexKind, build_index};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -49,15 +51,8 @@ pub(crate) const SAMPLE_POINTS: usize = 400_000;
 /// Most points (with their blocks' margins) of the patches the estimates are made on.
 pub(crate) const PATCH_POINTS: usize = 1_000_000;
 
-/// Blocks the patches are taken from (spread over the block order).
-const PATCH_BLOCKS: usize = 4;
-
 /// How much wider than the rough reach the partition's margin is.
 const MARGIN_FACTOR: f64 = 1.25;
-
-/// Share of opposed neighbour normals above which the normals count as inconsistent (as in the
-/// in-memory pipeline, which then reorients them; that needs the whole cloud, so here it refuses).
-const INCONSISTENT_NORMALS: f64 = 0.05;
 
 /// The carrier every task rebuilds over its own points.
 pub(crate) enum CarrierPlan {
@@ -259,75 +254,6 @@ fn spill_dir(options: &TiledOptions) -> Result<tempfile::TempDir, ReconError> {
         })
 }
 
-/// The blocks the patches come from: up to [`PATCH_BLOCKS`] spread evenly over `alive` (the
-/// blocks with points), as many as keep the patches' points within [`PATCH_POINTS`] (one at least).
-fn pick_patches(alive: &[usize], spilled: &[usize]) -> Vec<usize> {
-    let m = alive.len();
-    let k = PATCH_BLOCKS.min(m);
-    let mut picks: Vec<usize> = Vec::new();
-    let mut total = 0;
-    for j in 0..k {
-        let b = alive[(2 * j + 1) * m / (2 * k)];
-        if picks.contains(&b) {
-            continue;
-        }
-        if !picks.is_empty() && total + spilled[b] > PATCH_POINTS {
-            break;
-        }
-        total += spilled[b];
-        picks.push(b);
-    }
-    picks
-}
-
-/// The surface test, the normals' consistency, the support and the noise, with the in-memory
-/// pipeline's functions, on the points of the patch blocks `picks` (their cores and margins,
-/// duplicates merged); the support radius is measured at the points of their cores (whose
-/// neighbourhoods the margins complete), the rest over all of the patch. `used` scales the
-/// support's non-zero estimate to the whole cloud.
-#[allow(clippy::too_many_arguments)]
-fn estimate_on_patches(
-    dir: &std::path::Path,
-    picks: &[usize],
-    cores: &[Aabb],
-    normals: bool,
-    tol: f64,
-    used: usize,
-    params: &ReconParams,
-) -> Result<(SupportEstimate, NoiseEstimate), ReconError> {
-    let mut recs = Vec::new();
-    for &b in picks {
-        recs.extend(route::read_spill(&route::spill_path(dir, b), normals)?);
-    }
-    recs.sort_unstable_by_key(|r| r.id);
-    recs.dedup_by_key(|r| r.id);
-    let keep = route::keep_flags(&recs, tol)?;
-    let kept: Vec<route::Record> = (recs.iter().zip(keep))
-        .filter(|(_, k)| *k)
-        .map(|(r, _)| *r)
-        .collect();
-    drop(recs);
-    let points: Vec<Point3> = kept.iter().map(|r| r.p).collect();
-    let index = build_index(&points, IndexKind::KdTree, 16)?;
-    let knn = |p: &Point3, k: usize, out: &mut Vec<(u32, f64)>| index.nearest_k(p, k, out);
-    crate::clean::check_local_shape(&points, knn)?;
-    if normals {
-        let ns: Vec<Point3> = kept.iter().map(|r| r.n).collect();
-        let share = crate::normals::inconsistent_fraction(&points, &ns, 8, knn);
-        if share > INCONSISTENT_NORMALS {
-            return Err(ReconError::InconsistentNormals { share });
-        }
-    }
-    let core: Vec<Point3> = (points.iter())
-        .filter(|p| picks.iter().any(|&b| cores[b].contains(p)))
-        .copied()
-        .collect();
-    let mut support = estimate_support(&core, index.as_ref(), params.support)?;
-    support.estimated_nnz = support.mean_neighbours * used as f64;
-    let noise = estimate_noise(&points, support.spacing, knn);
-    Ok((support, noise))
-}
-
 /// The partition, written again with a wider margin when the exact reach needs it.
 struct Partition {
     dir: tempfile::TempDir,
@@ -340,7 +266,7 @@ struct Partition {
 /// Steps 2 and 3 of the module doc.
 #[allow(clippy::too_many_arguments)]
 fn partition(
-    input: &TiledInput<'_>,
+    scan: &Scan<'_>,
     s: &Survey,
     cores: &[Aabb],
     normalization: &Normalization,
@@ -353,23 +279,17 @@ fn partition(
     // Route every point into a fresh spill folder with the given margin.
     let spill = |margin: f64| {
         let dir = spill_dir(options)?;
-        let routed = route::route(
-            input,
-            cores,
-            margin,
-            normalization,
-            s.has_normals,
-            dir.path(),
-        )?;
+        let routing = Routing::new(cores, margin, normalization, s.has_normals, dir.path());
+        let routed = scan.route(&routing, cores.len())?;
         Ok::<_, ReconError>((dir, routed))
     };
     let (dir, routed) = spill(margin)?;
     let alive: Vec<usize> = (0..cores.len())
         .filter(|&b| routed.core_points[b] > 0)
         .collect();
-    let picks = pick_patches(&alive, &routed.spilled);
-    let (support, noise) = estimate_on_patches(
-        dir.path(),
+    let picks = patches::pick_patches(&alive, &routed.spilled);
+    let (support, noise) = patches::estimate_on_patches(
+        (dir.path(), scan.parts()),
         &picks,
         cores,
         s.has_normals,
@@ -405,10 +325,11 @@ pub(crate) fn prepare(
     block_points: usize,
     store: &Store,
     progress: &dyn Progress,
-) -> Result<Plan, ReconError> {
+) -> Result<(Plan, Vec<TaskReport>), ReconError> {
     check_supported(params)?;
     progress.stage(Stage::Clean);
-    let s = survey::survey(input, SAMPLE_POINTS)?;
+    let mut scan = Scan::new(input, options.split, &options.worker)?;
+    let s = scan.survey(SAMPLE_POINTS)?;
     let kind = carrier_kind(params, s.has_normals)?;
     let normalization = Normalization::from_aabb(&s.bbox);
     let tol = if params.clean.merge_tolerance > 0.0 {
@@ -442,7 +363,7 @@ pub(crate) fn prepare(
     let margin = MARGIN_FACTOR * exact_reach(&rough)?;
     let cores = plan_leaves(&sample, &bounds, (block_points / s.step).max(1), true);
     let part = partition(
-        input,
+        &scan,
         &s,
         &cores,
         &normalization,
@@ -464,6 +385,7 @@ pub(crate) fn prepare(
     let overlap = 3.0 * coarsest(params, support.radius);
     let out = BlockOutput {
         dir: part.dir.path(),
+        parts: scan.parts(),
         cores: &cores,
         overlap,
         halo,
@@ -472,7 +394,9 @@ pub(crate) fn prepare(
         flip: normals_flipped,
         stray_sigma: noise.noisy.then_some(noise.sigma),
     };
-    let (blocks, dropped) = write_blocks(&out, &part.alive, store, progress)?;
+    let (blocks, dropped) = scan.timed("clean-up".into(), || {
+        write_blocks(&out, &part.alive, store, progress)
+    })?;
     let clean = CleanStats {
         points: s.total,
         used: s.finite - dropped.merged - dropped.strays,
@@ -483,7 +407,7 @@ pub(crate) fn prepare(
         invalid_normals: s.invalid_normals,
         ..Default::default()
     };
-    Ok(Plan {
+    let plan = Plan {
         normalization,
         support,
         noise,
@@ -497,12 +421,15 @@ pub(crate) fn prepare(
         clean,
         normals_flipped,
         carrier_kind,
-    })
+    };
+    Ok((plan, scan.take_tasks()))
 }
 
 /// What turning spill files into block point sets needs.
 struct BlockOutput<'a> {
     dir: &'a std::path::Path,
+    /// Spill parts per block.
+    parts: usize,
     /// The provisional cores (spill file `b` is core `b`'s).
     cores: &'a [Aabb],
     overlap: f64,
@@ -526,8 +453,7 @@ fn write_blocks(
         (alive.par_iter().enumerate())
             .map(|(b, &prov)| {
                 super::super::check_cancel(progress)?;
-                let path = route::spill_path(out.dir, prov);
-                let records = route::read_spill(&path, out.normals)?;
+                let records = route::read_block_spill(out.dir, prov, out.parts, out.normals)?;
                 let core = out.cores[prov];
                 let outer = core.inflated(out.overlap);
                 let reach = outer.inflated(out.halo);
@@ -542,7 +468,7 @@ fn write_blocks(
                     owns,
                 )?;
                 drop(records);
-                let _ = std::fs::remove_file(&path);
+                route::remove_block_spill(out.dir, prov, out.parts);
                 let members = set.points.iter().filter(|p| outer.contains(p)).count();
                 store.put(&block_key(b), set.encode())?;
                 Ok((
@@ -598,7 +524,7 @@ mod tests {
         };
         let store = Store::open(&options.store).unwrap();
         let input = TiledInput::Cloud(&cloud);
-        let plan = prepare(&input, &params, &options, 500, &store, &NoProgress).unwrap();
+        let (plan, _) = prepare(&input, &params, &options, 500, &store, &NoProgress).unwrap();
         assert!(plan.blocks.len() >= 8, "{} blocks", plan.blocks.len());
         // Brute force over the whole cloud: ids among the finite points, the same transform and
         // tolerance, and the in-memory rule (dropped when a lower id lies within the tolerance).

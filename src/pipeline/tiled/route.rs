@@ -44,9 +44,10 @@ fn io_err(path: &Path, source: std::io::Error) -> ReconError {
     })
 }
 
-/// The spill file of provisional block `b` in `dir`.
-pub(crate) fn spill_path(dir: &Path, b: usize) -> PathBuf {
-    dir.join(format!("spill-{b}"))
+/// Part `part` of provisional block `b`'s spill in `dir`: the points of one input range (one
+/// part when the input is read whole), read back in part order.
+pub(crate) fn spill_path(dir: &Path, b: usize, part: usize) -> PathBuf {
+    dir.join(format!("spill-{b}-{part}"))
 }
 
 /// From a point to the indices of the boxes that may contain it: a uniform grid over the boxes'
@@ -108,6 +109,7 @@ impl Lookup {
 }
 
 /// What the partition pass wrote.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct Routed {
     /// Points whose first containing core (lowest block index) is each block's, before merging.
     pub core_points: Vec<usize>,
@@ -115,28 +117,89 @@ pub(crate) struct Routed {
     pub spilled: Vec<usize>,
 }
 
-/// The partition pass: stream `input`, normalise each finite point (its id counts the finite
-/// points before it) and append it to the spill file in `dir` of every block whose `core`
-/// inflated by `margin` contains it.
-pub(crate) fn route(
-    input: &TiledInput<'_>,
-    cores: &[Aabb],
-    margin: f64,
-    normalization: &Normalization,
+impl Routed {
+    /// Adds the counts of another part.
+    pub(crate) fn add(&mut self, other: &Routed) {
+        for (a, b) in self.core_points.iter_mut().zip(&other.core_points) {
+            *a += b;
+        }
+        for (a, b) in self.spilled.iter_mut().zip(&other.spilled) {
+            *a += b;
+        }
+    }
+}
+
+/// Where and how the partition routes points: the cores, their boxes inflated by the margin, the
+/// lookup over those, the normalisation and the spill folder. Shared by the parts of a pass.
+pub(crate) struct Routing<'a> {
+    cores: &'a [Aabb],
+    reach: Vec<Aabb>,
+    lookup: Lookup,
+    normalization: &'a Normalization,
     normals: bool,
-    dir: &Path,
+    dir: &'a Path,
+}
+
+impl<'a> Routing<'a> {
+    /// Routing into spill files in `dir` for `cores` inflated by `margin` (normalised units).
+    pub(crate) fn new(
+        cores: &'a [Aabb],
+        margin: f64,
+        normalization: &'a Normalization,
+        normals: bool,
+        dir: &'a Path,
+    ) -> Self {
+        let reach: Vec<Aabb> = cores.iter().map(|c| c.inflated(margin)).collect();
+        let lookup = Lookup::new(&reach);
+        Routing {
+            cores,
+            reach,
+            lookup,
+            normalization,
+            normals,
+            dir,
+        }
+    }
+}
+
+/// A pass over some points in input order: calls its argument with consecutive chunks.
+pub(crate) type Pass<'p> = dyn Fn(&mut super::survey::ChunkFn<'_>) -> Result<(), ReconError> + 'p;
+
+/// The partition pass over `input` whole: see [`route_part`].
+pub(crate) fn route(input: &TiledInput<'_>, routing: &Routing<'_>) -> Result<Routed, ReconError> {
+    route_part(routing, 0, 0, SPILL_BUFFER_BYTES, &|f| {
+        input.for_each_chunk(f)
+    })
+}
+
+/// One part of the partition pass: stream `pass`, normalise each finite point (its id is
+/// `first_id` plus the finite points before it in the pass) and append it to part `part` of the
+/// spill of every block whose core inflated by the margin contains it; at most `buffer_bytes`
+/// buffered over all blocks.
+pub(crate) fn route_part(
+    routing: &Routing<'_>,
+    part: usize,
+    first_id: u32,
+    buffer_bytes: usize,
+    pass: &Pass<'_>,
 ) -> Result<Routed, ReconError> {
-    let reach: Vec<Aabb> = cores.iter().map(|c| c.inflated(margin)).collect();
-    let lookup = Lookup::new(&reach);
+    let Routing {
+        cores,
+        reach,
+        lookup,
+        normalization,
+        normals,
+        dir,
+    } = routing;
     let nb = cores.len();
-    let cap = (SPILL_BUFFER_BYTES / nb.max(1)).clamp(16 << 10, 1 << 20);
+    let cap = (buffer_bytes / nb.max(1)).clamp(16 << 10, 1 << 20);
     let mut buffers: Vec<Vec<u8>> = vec![Vec::new(); nb];
     let mut routed = Routed {
         core_points: vec![0; nb],
         spilled: vec![0; nb],
     };
     let flush = |b: usize, buf: &mut Vec<u8>| -> Result<(), ReconError> {
-        let path = spill_path(dir, b);
+        let path = spill_path(dir, b, part);
         let mut f = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -146,8 +209,8 @@ pub(crate) fn route(
         buf.clear();
         Ok(())
     };
-    let mut id = 0u32;
-    input.for_each_chunk(&mut |points, chunk_normals| {
+    let mut id = first_id;
+    pass(&mut |points, chunk_normals| {
         for (i, p) in points.iter().enumerate() {
             if !finite(p) {
                 continue;
@@ -166,7 +229,7 @@ pub(crate) fn route(
                 }
                 let buf = &mut buffers[b];
                 buf.extend_from_slice(&id.to_le_bytes());
-                let values = if normals { 6 } else { 3 };
+                let values = if *normals { 6 } else { 3 };
                 for v in q.iter().chain(n.iter()).take(values) {
                     buf.extend_from_slice(&v.to_le_bytes());
                 }
@@ -185,6 +248,27 @@ pub(crate) fn route(
         }
     }
     Ok(routed)
+}
+
+/// The records of block `b`'s spill in `dir`, its `parts` parts in order (ascending id).
+pub(crate) fn read_block_spill(
+    dir: &Path,
+    b: usize,
+    parts: usize,
+    normals: bool,
+) -> Result<Vec<Record>, ReconError> {
+    let mut out = Vec::new();
+    for part in 0..parts {
+        out.extend(read_spill(&spill_path(dir, b, part), normals)?);
+    }
+    Ok(out)
+}
+
+/// Removes the parts of block `b`'s spill.
+pub(crate) fn remove_block_spill(dir: &Path, b: usize, parts: usize) {
+    for part in 0..parts {
+        let _ = std::fs::remove_file(spill_path(dir, b, part));
+    }
 }
 
 /// The records of a spill file (ascending id: the pass appends in input order); an absent
