@@ -77,7 +77,7 @@ mod tests {
     /// Points of a sphere (radius 0.3 about 0.5) on a Fibonacci lattice, pushed radially by
     /// Gaussian noise of `sigma`; returns the noisy points.
     fn noisy_sphere(n: usize, sigma: f64) -> Vec<Point3> {
-        let mut rng = SplitMix64::new(7);
+        let mut rng = SplitMix64(7);
         let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
         (0..n)
             .map(|i| {

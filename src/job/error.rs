@@ -10,7 +10,7 @@ pub struct ErrorBody {
     /// Stable identifier: `bad_parameter`, `bad_multipart`, `incomplete_body`, `upload_too_slow`,
     /// `unauthorized`, `not_found`, `not_ready`, `method_not_allowed`, `too_large`,
     /// `unsupported_media_type`, `invalid_input`, `unreconstructable`, `system_too_large`,
-    /// `conflicting_parameters`, `unsuitable_parameter`,
+    /// `conflicting_parameters`, `unsuitable_parameter`, `invalid_expression`,
     /// `queue_full`, `busy`, `shutting_down`, `job_store_unavailable`, `job_timeout`,
     /// `interrupted`, `cancelled`, `reconstruction_failed`, `insufficient_storage`, `no_lod`,
     /// `no_field`, `internal`.

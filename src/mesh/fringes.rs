@@ -40,7 +40,9 @@ pub fn fringes(mesh: &TriMesh, radius: f64) -> (Vec<bool>, usize) {
             deepest[c as usize] = deepest[c as usize].max(depth[v as usize]);
         }
     }
-    let largest = (0..sizes.len()).max_by_key(|&c| (sizes[c], Reverse(c))).unwrap_or(0);
+    let largest = (0..sizes.len())
+        .max_by_key(|&c| (sizes[c], Reverse(c)))
+        .unwrap_or(0);
     let shallow: Vec<bool> = (0..sizes.len())
         .map(|c| c != largest && deepest[c] <= FRINGE_DEPTH * radius)
         .collect();
@@ -62,7 +64,8 @@ fn beside_kept(mesh: &TriMesh, labels: &[u32], shallow: &[bool], reach: f64) -> 
         .map(|v| mesh.vertices[v])
         .collect();
     let mut near = vec![false; shallow.len()];
-    let Ok(index) = crate::spatial::build_index(&kept, crate::spatial::IndexKind::KdTree, 16) else {
+    let Ok(index) = crate::spatial::build_index(&kept, crate::spatial::IndexKind::KdTree, 16)
+    else {
         return near;
     };
     let mut knn = Vec::new();
@@ -160,8 +163,10 @@ mod tests {
         let id = |i: usize, j: usize| base + (j * (nx + 1) + i) as u32;
         for j in 0..ny {
             for i in 0..nx {
-                mesh.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                mesh.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+                mesh.triangles
+                    .push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                mesh.triangles
+                    .push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
             }
         }
     }
@@ -189,6 +194,10 @@ mod tests {
         assert!(drop[drop.len() - 72..].iter().all(|&d| !d));
         // Depth is measured along edges from the border: the grid's centre lies 0.5 inside.
         let depth = border_distance(&mesh);
-        assert!((depth[50 * 101 + 50] - 0.5).abs() < 1e-9, "{}", depth[50 * 101 + 50]);
+        assert!(
+            (depth[50 * 101 + 50] - 0.5).abs() < 1e-9,
+            "{}",
+            depth[50 * 101 + 50]
+        );
     }
 }

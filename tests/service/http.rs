@@ -210,7 +210,6 @@ async fn bad_parameters_and_media_types_are_json_errors() {
         "kernel=gauss",
         "bogus=1",
         "wait=-1",
-        "resolution=32&resolution=40",
         "merge-tolerance=1",
         "max-memory-mib=0",
     ] {
@@ -227,6 +226,19 @@ async fn bad_parameters_and_media_types_are_json_errors() {
             "{q}"
         );
     }
+    // A parameter given twice (in the query, or in the query and a multipart field) is one
+    // that conflicts with itself.
+    let a = post(
+        &s.app,
+        "/v1/reconstructions?resolution=32&resolution=40",
+        "text/plain",
+        cloud.clone(),
+    )
+    .await;
+    assert_eq!(
+        a.expect_error(StatusCode::UNPROCESSABLE_ENTITY),
+        "conflicting_parameters"
+    );
     for ct in ["image/png", "application/json", "model/gltf-binary"] {
         let a = post(&s.app, "/v1/reconstructions", ct, cloud.clone()).await;
         assert_eq!(
