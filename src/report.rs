@@ -42,9 +42,11 @@ pub struct Report {
 /// One task of a distributed task-graph run (report `tasks[]`).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct TaskReport {
-    /// `prepare` (the `start` task that planned the graph), `block <b>`, `region <r>`, `merge`, or
-    /// one of prepare's pass tasks: `survey`, `route` (the input read whole), `survey range <r>`,
-    /// `sample range <r>`, `route range <r>` (read by byte ranges), `clean-up`.
+    /// `prepare` (the span of the graph's prepare), `block <b>`, `region <r>`, `merge`, or one of
+    /// prepare's tasks: `survey`, `route` (the input read whole), `survey range <r>`,
+    /// `sample range <r>`, `route range <r>` (read by byte ranges), `clean-up` (in one process);
+    /// spread over the workers also `clean-up <k>` per block and the steps between the phases,
+    /// `number ranges`, `plan blocks`, `estimates <generation>`, `complete plan`.
     pub task: String,
     /// Id of the worker that ran it (the last delivery's, when it ran more than once).
     pub worker: String,
@@ -57,7 +59,9 @@ pub struct TaskReport {
 }
 
 /// The longest chain of dependent tasks of a task-graph run: prepare, then the slowest block
-/// (every region waits for every block), the slowest region, then merge.
+/// (every region waits for every block), the slowest region, then merge. With the prepare
+/// spread over the workers, prepare is itself the chain of its phases' slowest tasks (survey
+/// range, sample range, route range, clean-up) and the steps between them.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CriticalPath {
     /// The chain's tasks, in order.
@@ -79,10 +83,27 @@ pub fn critical_path(tasks: &[TaskReport]) -> Option<CriticalPath> {
             .filter(|t| t.task == prefix || t.task.starts_with(&format!("{prefix} ")))
             .max_by(|a, b| a.seconds.total_cmp(&b.seconds))
     };
-    let chain: Vec<&TaskReport> = ["prepare", "block", "region", "merge"]
-        .into_iter()
-        .filter_map(slowest)
-        .collect();
+    // A prepare spread over the workers (one clean-up task per block) is a chain of its own:
+    // its phases' slowest tasks and the steps between them replace the `prepare` span.
+    let spread = tasks.iter().any(|t| t.task.starts_with("clean-up "));
+    let phases: &[&str] = if spread {
+        &[
+            "survey range",
+            "number ranges",
+            "sample range",
+            "plan blocks",
+            "route range",
+            "estimates",
+            "clean-up",
+            "complete plan",
+            "block",
+            "region",
+            "merge",
+        ]
+    } else {
+        &["prepare", "block", "region", "merge"]
+    };
+    let chain: Vec<&TaskReport> = phases.iter().copied().filter_map(slowest).collect();
     Some(CriticalPath {
         tasks: chain.iter().map(|t| t.task.clone()).collect(),
         seconds: chain.iter().map(|t| t.seconds).sum(),

@@ -3,18 +3,21 @@
 //! stateless API nodes over the same job records.
 //!
 //! ```text
-//!  API node ── input ─► object store "rbfsurf-objects": <job>/input.<ext>, plan, points/<b>, spline/<b>,
-//!     │                                     block/<b>, piece/<r>, region/<r>, result/<file>
-//!     ├── record ─► key-value "rbfsurf-jobs": job.<id> (the job view + options), dag.<id> (done bits)
-//!     └── task  ─► work-queue stream "RBFSURF_TASKS", subjects rbfsurf.tasks.{start,block,region,merge}
+//!  API node ── input ─► object store "rbfsurf-objects": <job>/input.<ext>/<k> (8 MiB segments),
+//!     │                  prep/…, plan, points/<b>, spline/<b>, block/<b>, piece/<r>, region/<r>, result/<file>
+//!     ├── record ─► key-value "rbfsurf-jobs": job.<id> (the job view + options), prep.<id>, dag.<id> (done bits)
+//!     └── task  ─► work-queue stream "RBFSURF_TASKS", subjects rbfsurf.tasks.{start,survey,sample,route,
+//!                    │                                   cleanup,block,region,merge,whole}
 //!                    └─► durable pull consumer "rbfsurf-workers" (explicit ack, ack wait ≤ 30 s,
 //!                        progress heartbeats while a task runs, at most 5 deliveries)
 //! ```
 //!
-//! A job starts as one `start` task. Its worker reads the input; when the in-memory estimate
-//! fits the job's memory budget it reconstructs the whole job there (the normal run stage, every
-//! feature); otherwise it runs the graph's prepare step, stores the plan and the blocks' point
-//! sets, and publishes one `block` task per block. The worker whose block completes the set
+//! A job starts as one `start` task. When the in-memory estimate fits the job's memory budget
+//! (and the job is not spread over idle workers, [`spread`]) its worker reads the input and
+//! reconstructs the whole job there (the normal run stage, every feature). Otherwise the graph's
+//! prepare step runs: over the workers, one task per byte range of the input and one clean-up
+//! task per block ([`prepare`]), when the input's format splits into ranges; else in the `start`
+//! task. It stores the plan and the blocks' point sets and publishes one `block` task per block. The worker whose block completes the set
 //! (recorded with compare-and-set on `dag.<id>`) publishes the `region` tasks, and the one that
 //! completes the regions the `merge` task, which welds, post-processes and stores the results.
 //! Every task writes only keys named by its job and block or region, and every publish carries
@@ -23,6 +26,7 @@
 pub(crate) mod connect;
 mod objects;
 mod outcome;
+mod prepare;
 pub mod presence;
 mod queue;
 mod records;

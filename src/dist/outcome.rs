@@ -92,6 +92,7 @@ pub fn finish_job(ctx: &Ctx, job: Uuid, outcome: Outcome) -> Result<(), TaskErro
 
 /// Removes job `job`'s intermediate values (names from its graph state; none without one).
 pub(super) fn remove_intermediates(ctx: &Ctx, job: Uuid) -> Result<(), TaskError> {
+    super::prepare::remove(&ctx.res, ctx, job)?;
     let dag = ctx.block_on(records::load::<DagState>(&ctx.res.jobs, &dag_key(job)))?;
     if let Some((d, _)) = dag {
         let keys = objects::intermediates(d.blocks.len(), d.regions.len());

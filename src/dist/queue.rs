@@ -19,6 +19,16 @@ pub enum TaskKind {
     Region(usize),
     /// Weld, post-process, store the results.
     Merge,
+    /// Count byte range `n` of the input (the spread prepare, [`super::prepare`]).
+    Survey(usize),
+    /// Take the subsample's points of range `n`.
+    Sample(usize),
+    /// Route range `n` into the blocks' spills of the partition's generation `g`.
+    Route(usize, u32),
+    /// Make block `n`'s point set from its spill.
+    CleanUp(usize),
+    /// Run the whole job on one worker (a spread job the task graph refused).
+    Whole,
 }
 
 /// One task.
@@ -38,15 +48,25 @@ impl Task {
             TaskKind::Block(b) => format!("block {b}"),
             TaskKind::Region(r) => format!("region {r}"),
             TaskKind::Merge => "merge".into(),
+            TaskKind::Survey(r) => format!("survey range {r}"),
+            TaskKind::Sample(r) => format!("sample range {r}"),
+            TaskKind::Route(r, g) => format!("route range {r} (generation {g})"),
+            TaskKind::CleanUp(k) => format!("clean-up {k}"),
+            TaskKind::Whole => "whole".into(),
         }
     }
 
     fn subject_and_id(&self) -> (String, String) {
         let (kind, n) = match self.kind {
             TaskKind::Start => ("start", None),
-            TaskKind::Block(b) => ("block", Some(b)),
-            TaskKind::Region(r) => ("region", Some(r)),
+            TaskKind::Block(b) => ("block", Some(b.to_string())),
+            TaskKind::Region(r) => ("region", Some(r.to_string())),
             TaskKind::Merge => ("merge", None),
+            TaskKind::Survey(r) => ("survey", Some(r.to_string())),
+            TaskKind::Sample(r) => ("sample", Some(r.to_string())),
+            TaskKind::Route(r, g) => ("route", Some(format!("{g}.{r}"))),
+            TaskKind::CleanUp(k) => ("cleanup", Some(k.to_string())),
+            TaskKind::Whole => ("whole", None),
         };
         let id = match n {
             Some(n) => format!("{}.{kind}.{n}", self.job),

@@ -64,6 +64,11 @@ pub fn dag_key(id: Uuid) -> String {
     format!("dag.{id}")
 }
 
+/// Key of job `id`'s spread prepare state ([`super::prepare::PrepState`]).
+pub fn prep_key(id: Uuid) -> String {
+    format!("prep.{id}")
+}
+
 /// Conflicts or failures tolerated by one update before it gives up.
 const ATTEMPTS: u32 = 120;
 

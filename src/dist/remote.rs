@@ -6,12 +6,13 @@
 
 use super::DistError;
 use super::connect::{self, NatsConfig, Resources};
-use super::objects;
+use super::objects::{self, JobObjects};
 use super::queue::{self, Task, TaskKind};
 use super::records::{self, DELETE_CLAIM_STALE_MS, DagState, JobRecord, dag_key, job_key};
 use crate::job::{ErrorBody, JobBackend, JobManager, JobStatus, JobView, ServerConfig};
 use crate::job::{unix_now, unix_now_ms};
 use crate::params::ReconOptions;
+use crate::pipeline::tiled::store::Store;
 use async_nats::jetstream::kv::Operation;
 use futures_util::StreamExt;
 use std::sync::Arc;
@@ -54,12 +55,7 @@ impl JobBackend for NatsJobs {
         let job = view.id;
         self.rt
             .block_on(async {
-                objects::put(
-                    &self.res.objects,
-                    &objects::name(job, &view.input.file),
-                    input,
-                )
-                .await?;
+                super::prepare::put_input(&self.res.objects, job, &view.input.file, input).await?;
                 records::create(&self.res.jobs, &job_key(job), &record).await?;
                 let start = Task {
                     job,
@@ -136,8 +132,16 @@ async fn purge(res: &Resources, id: Uuid, cutoff: Option<u64>) -> Result<bool, D
     let mut keys: Vec<String> = (rec.results.iter())
         .map(|f| format!("result/{f}"))
         .collect();
-    keys.push(rec.view.input.file.clone());
+    let input = &rec.view.input;
+    keys.extend(super::prepare::input_keys(&input.file, input.bytes));
     objects::remove(res, id, &keys).await?;
+    let store = Store::Remote(Box::new(JobObjects {
+        os: res.objects.clone(),
+        job: id,
+        rt: tokio::runtime::Handle::current(),
+        written: None,
+    }));
+    super::prepare::remove_async(res, id, Arc::new(store)).await?;
     // The graph state first: while the record exists, a new claim can still find its names.
     for key in [dag_key(id), job_key(id)] {
         records::purge(res, &key).await?;

@@ -15,7 +15,7 @@
 
 use super::presence;
 use super::steps::{Ctx, TaskError};
-use crate::geometry::PointCloud;
+use crate::job::model::InputAttributes;
 use crate::mesh::ColorMode;
 use crate::params::ReconParams;
 use crate::pipeline::tiled;
@@ -25,15 +25,15 @@ use crate::report::TaskReport;
 /// (smaller jobs gain little next to the extra pass over the input that prepare makes).
 pub const SPREAD_POINTS: u64 = 500_000;
 
-/// Whether a job of `cloud` (`n` points), which fits its budget in memory, is split into block
+/// Whether a job of `n` points with `attrs`, which fits its budget in memory, is split into block
 /// tasks: see the module doc. Returns the idle workers seen (for the log) when it is.
 pub(super) fn spread_over(
     ctx: &Ctx,
     n: u64,
     params: &ReconParams,
-    cloud: &PointCloud,
+    attrs: InputAttributes,
 ) -> Result<Option<Vec<String>>, TaskError> {
-    if n < ctx.spread_points || !graph_can_run(params, cloud) {
+    if n < ctx.spread_points || !graph_can_run(params, attrs) {
         return Ok(None);
     }
     let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
@@ -46,17 +46,17 @@ pub(super) fn spread_over(
 
 /// Whether the task graph gives this job what the whole job would: CSRBF with a closed surface
 /// and no outlier filter, normals for the local carrier, no vertex colours from the input.
-fn graph_can_run(params: &ReconParams, cloud: &PointCloud) -> bool {
+fn graph_can_run(params: &ReconParams, attrs: InputAttributes) -> bool {
     use crate::rbf::CarrierKind;
     let needs_normals = matches!(params.carrier.kind, CarrierKind::Auto | CarrierKind::Local);
     let colors = match params.color {
-        ColorMode::Rgb => cloud.colors.is_some(),
-        ColorMode::Intensity => cloud.intensity.is_some(),
+        ColorMode::Rgb => attrs.colors,
+        ColorMode::Intensity => attrs.intensity,
         ColorMode::None => false,
     };
     tiled::supports(params)
         && params.blocks != crate::rbf::Blocks::None
-        && !(needs_normals && cloud.normals.is_none())
+        && (attrs.normals || !needs_normals)
         && !colors
 }
 

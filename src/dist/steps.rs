@@ -44,7 +44,7 @@ impl From<DistError> for TaskError {
 }
 
 /// A reconstruction error as the job's error (a stop requested by a DELETE included).
-fn recon_error(e: ReconError) -> TaskError {
+pub(super) fn recon_error(e: ReconError) -> TaskError {
     match e {
         ReconError::Store(s) => TaskError::Retry(s.to_string()),
         e => TaskError::Job(ErrorBody {
@@ -209,6 +209,8 @@ pub fn run_task(ctx: &Ctx, task: Task, progress: &TaskProgress) -> Result<bool, 
         TaskKind::Block(b) => block(ctx, task.job, &params, b, progress),
         TaskKind::Region(r) => region(ctx, task.job, &params, r, progress),
         TaskKind::Merge => merge(ctx, &rec, &params),
+        TaskKind::Whole => whole_from_store(ctx, &rec, &params, progress),
+        k => super::prepare::run(ctx, &rec, &params, k, progress),
     }
     .map(|()| true)
 }
@@ -233,9 +235,15 @@ fn start(
     {
         return volume(ctx, rec, progress);
     }
-    let data = ctx.block_on(objects::get(
+    if let Some(r) = start_by_ranges(ctx, rec, params, started_ms)? {
+        return r;
+    }
+    let input = &rec.view.input;
+    let data = ctx.block_on(super::prepare::get_input(
         &ctx.res.objects,
-        &objects::name(job, &rec.view.input.file),
+        job,
+        &input.file,
+        input.bytes,
     ))?;
     let format =
         PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
@@ -260,7 +268,8 @@ fn start(
     };
     match plan_execution(n, params).map_err(recon_error)? {
         Execution::InMemory => {
-            let spread = super::spread::spread_over(ctx, n, params, &cloud)?;
+            let attrs = crate::job::model::InputAttributes::of(&cloud);
+            let spread = super::spread::spread_over(ctx, n, params, attrs)?;
             drop(cloud);
             if let Some(idle) = spread {
                 tracing::info!(job = %job, points = n, idle = ?idle, "splitting the job into block tasks");
@@ -288,6 +297,77 @@ fn start(
             prepare_graph(ctx, job, params, &stream(), n, started_ms, progress)
         }
     }
+}
+
+/// A job the task graph can run, whose input splits into byte ranges and whose record knows its
+/// points and attributes: the prepare runs over the workers ([`super::prepare`]), and the start
+/// task reads only the input's first segment. `None`: the start task goes on with the input.
+fn start_by_ranges(
+    ctx: &Ctx,
+    rec: &JobRecord,
+    params: &ReconParams,
+    started_ms: u64,
+) -> Result<Option<Result<(), TaskError>>, TaskError> {
+    let input = &rec.view.input;
+    let (tiled::InputSplit::Bytes(range_bytes), Some(attrs)) = (ctx.split, input.attributes) else {
+        return Ok(None);
+    };
+    if input.bytes <= range_bytes {
+        return Ok(None);
+    }
+    let n = input.points as u64;
+    let spread = match plan_execution(n, params).map_err(recon_error)? {
+        Execution::OutOfCore(_) => false,
+        Execution::InMemory => {
+            if super::spread::spread_over(ctx, n, params, attrs)?.is_none() {
+                return Ok(None);
+            }
+            true
+        }
+    };
+    let Some((_, split)) = super::prepare::plan_split(ctx, rec, params, range_bytes)? else {
+        return Ok(None);
+    };
+    Ok(Some(super::prepare::start(
+        ctx,
+        rec,
+        params,
+        &split,
+        range_bytes,
+        spread,
+        started_ms,
+    )))
+}
+
+/// A spread job the task graph refused, run whole on this worker.
+fn whole_from_store(
+    ctx: &Ctx,
+    rec: &JobRecord,
+    params: &ReconParams,
+    progress: &TaskProgress,
+) -> Result<(), TaskError> {
+    let input = &rec.view.input;
+    let data = ctx.block_on(super::prepare::get_input(
+        &ctx.res.objects,
+        rec.view.id,
+        &input.file,
+        input.bytes,
+    ))?;
+    let format = PointFormat::from_path(std::path::Path::new(&input.file)).ok_or_else(|| {
+        TaskError::Job(crate::job::error::internal_body(
+            "stored input has an unknown extension",
+        ))
+    })?;
+    let limits = ReadLimits {
+        max_points: rec.max_points,
+        max_bytes: rec.max_bytes,
+        max_memory_mib: params.max_memory_mib,
+    };
+    let source = PointSource::Bytes {
+        data: &data,
+        format,
+    };
+    whole(ctx, rec, params, source, &limits, progress)
 }
 
 /// The error of a failed run as the job's error (as the embedded service words it).
@@ -342,9 +422,12 @@ fn whole(
 fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), TaskError> {
     use crate::job::volume::{VolumeRequest, run_volume};
     let job = rec.view.id;
-    let bytes = ctx.block_on(objects::get(
+    let input = &rec.view.input;
+    let bytes = ctx.block_on(super::prepare::get_input(
         &ctx.res.objects,
-        &objects::name(job, &rec.view.input.file),
+        job,
+        &input.file,
+        input.bytes,
     ))?;
     let req = VolumeRequest::decode(&bytes).map_err(TaskError::Job)?;
     let ids = req.validate().map_err(|e| {
@@ -441,7 +524,7 @@ fn prepare_graph(
     Ok(())
 }
 
-fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {
+pub(super) fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {
     r.view.stage = Some(stage.name().into());
     r.view.stage_progress = fraction;
     if let Some(p) = stage.overall(fraction) {

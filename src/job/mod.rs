@@ -16,5 +16,5 @@ pub(crate) mod volume;
 pub use config::ServerConfig;
 pub use error::ErrorBody;
 pub use manager::{Job, JobManager, SubmitError};
-pub use model::{InputInfo, JobStatus, JobView, unix_now, unix_now_ms};
+pub use model::{InputAttributes, InputInfo, JobStatus, JobView, unix_now, unix_now_ms};
 pub use remote::JobBackend;

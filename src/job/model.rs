@@ -40,6 +40,31 @@ pub struct InputInfo {
     pub bytes: u64,
     /// Points read (before cleaning).
     pub points: usize,
+    /// What the points carry besides positions (absent for composition and morph requests).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attributes: Option<InputAttributes>,
+}
+
+/// What an input's points carry besides their positions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct InputAttributes {
+    /// Normals.
+    pub normals: bool,
+    /// RGB colours.
+    pub colors: bool,
+    /// Intensities.
+    pub intensity: bool,
+}
+
+impl InputAttributes {
+    /// The attributes of `cloud`.
+    pub fn of(cloud: &crate::geometry::PointCloud) -> Self {
+        InputAttributes {
+            normals: cloud.normals.is_some(),
+            colors: cloud.colors.is_some(),
+            intensity: cloud.intensity.is_some(),
+        }
+    }
 }
 
 /// The state of one job as returned by the API and stored in `status.json`.

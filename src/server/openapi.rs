@@ -13,7 +13,7 @@ use utoipa_axum::routes;
 #[openapi(
     info(title = "rbfsurf", description = "Watertight meshes from point clouds with compactly supported RBFs: upload a point file, follow the job, download the mesh and its report."),
     modifiers(&BearerAuth),
-    components(schemas(crate::job::ErrorBody, crate::job::JobStatus, crate::job::InputInfo, crate::job::JobView))
+    components(schemas(crate::job::ErrorBody, crate::job::JobStatus, crate::job::InputInfo, crate::job::InputAttributes, crate::job::JobView))
 )]
 struct ApiDoc;
 

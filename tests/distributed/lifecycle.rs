@@ -281,7 +281,8 @@ fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
     };
 
     // The task graph, cancelled in its block phase: the job ends, its blocks' tasks are
-    // skipped, and its intermediate values are removed (only the input stays until deletion).
+    // skipped, and its intermediate values are removed (only the input, one segment, stays
+    // until deletion).
     let mut graph = launch(&["--max-memory-mib", "110", "--resolution", "64"]);
     wait_until(120, "the block phase", || logs().contains("task=block"));
     let graph_id = job_ids(&a).pop().unwrap();
@@ -293,7 +294,7 @@ fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
     let t = Instant::now();
     loop {
         let left = rt.block_on(objects_of(&js, &id));
-        if left == vec![format!("{id}/input.ply")] {
+        if left == vec![format!("{id}/input.ply/0")] {
             break;
         }
         assert!(t.elapsed().as_secs() < 10, "objects left: {left:?}");

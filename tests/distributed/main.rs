@@ -257,3 +257,56 @@ fn api_nodes_and_workers_starting_together_all_start() {
         });
     }
 }
+
+/// Over its budget, prepared by byte ranges over two workers (`--range-mib 0.125`: 9 ranges of
+/// the 1.1 MB PLY): every pass and clean-up task is its own task on the work queue, both
+/// workers take them, and the GLB is the local out-of-core run's byte for byte.
+#[test]
+fn an_out_of_core_job_prepared_by_ranges_over_the_workers_equals_the_local_run() {
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
+    let dir = tmp.path();
+    let ranges = ["--range-mib", "0.125"];
+    let w1 = worker_with(&nats, dir, "w1", 1, &ranges);
+    let w2 = worker_with(&nats, dir, "w2", 1, &ranges);
+    let (_api, a) = serve(&nats, dir, "api");
+    let (cloud, local) = torus_and_local_run(dir);
+    let (out, rep_path) = (dir.join("dist.glb"), dir.join("dist.json"));
+    let job = submit(
+        &a,
+        &cloud,
+        &out,
+        &rep_path,
+        &["--max-memory-mib", OUT_OF_CORE_MIB, "--resolution", "64"],
+    );
+    finish_submit(job);
+    assert_same_mesh(&out, &local);
+    let rep = report(&rep_path);
+    let tasks = rep["tasks"].as_array().unwrap();
+    let count = |p: &str| {
+        (tasks.iter())
+            .filter(|t| t["task"].as_str().unwrap().starts_with(p))
+            .count()
+    };
+    assert_eq!(
+        (
+            count("survey range "),
+            count("sample range "),
+            count("route range ")
+        ),
+        (9, 9, 9)
+    );
+    assert_eq!(count("clean-up "), rep["blocks"].as_array().unwrap().len());
+    let logs = w1.log() + &w2.log();
+    assert!(logs.contains("prepare by byte ranges over the workers"));
+    for kind in ["survey range", "route range", "clean-up"] {
+        let on = [&w1, &w2]
+            .iter()
+            .filter(|w| w.log().contains(&format!("task={kind}")))
+            .count();
+        assert!(on >= 1, "{kind} tasks ran");
+    }
+    // The start task read only the input's first segment: no pass ran in it.
+    assert!(count("prepare") == 1 && !tasks.iter().any(|t| t["task"] == "route"));
+}

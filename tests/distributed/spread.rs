@@ -9,8 +9,6 @@ use std::path::{Path, PathBuf};
 /// A budget the 30,000-point torus fits in memory (estimate 112 MiB) whose out-of-core plan has
 /// several blocks (~7,300 core points each).
 const WITHIN_MIB: &str = "128";
-/// The workers' threshold in these tests (the default is 500,000 points).
-const SPREAD: [&str; 2] = ["--spread-points", "10000"];
 /// The threshold and byte ranges of 128 KiB: the torus's 1.1 MB PLY is prepared in 9 ranges.
 const SPREAD_BY_RANGES: [&str; 4] = ["--spread-points", "10000", "--range-mib", "0.125"];
 const JOB: [&str; 4] = ["--max-memory-mib", WITHIN_MIB, "--resolution", "64"];
@@ -62,9 +60,27 @@ fn assert_timeline(rep: &serde_json::Value) {
     let chain: Vec<&str> = (path["tasks"].as_array().unwrap().iter())
         .map(|t| t.as_str().unwrap())
         .collect();
-    assert_eq!(chain.len(), 4, "{path}");
-    assert!(chain[0] == "prepare" && chain[3] == "merge", "{path}");
-    assert!(chain[1].starts_with("block ") && chain[2].starts_with("region "));
+    let n = chain.len();
+    assert!(chain[n - 1] == "merge", "{path}");
+    assert!(chain[n - 3].starts_with("block ") && chain[n - 2].starts_with("region "));
+    if named("clean-up ") > 0 {
+        // Prepare spread over the workers: its phases, each after the one before.
+        let first = [
+            "survey range ",
+            "number ranges",
+            "sample range ",
+            "plan blocks",
+        ];
+        let then = ["route range ", "estimates ", "clean-up ", "complete plan"];
+        assert_eq!(n, 11, "{path}");
+        for (c, p) in chain.iter().zip(first.iter().chain(&then)) {
+            assert!(c.starts_with(p), "{path}");
+        }
+        assert_eq!(named("clean-up "), rep["blocks"].as_array().unwrap().len());
+    } else {
+        assert_eq!(n, 4, "{path}");
+        assert_eq!(chain[0], "prepare", "{path}");
+    }
     let (cp, wall) = (
         path["seconds"].as_f64().unwrap(),
         path["wall_seconds"].as_f64().unwrap(),
@@ -101,7 +117,12 @@ fn a_large_job_within_its_budget_spreads_over_idle_workers_with_the_local_graph_
     std::thread::sleep(std::time::Duration::from_millis(500));
     let (out, rep_path) = (dir.join("spread.glb"), dir.join("spread.json"));
     finish_submit(submit(&a, &cloud, &out, &rep_path, &JOB));
-    assert!((w1.log() + &w2.log()).contains("splitting the job into block tasks"));
+    let logs = w1.log() + &w2.log();
+    assert!(logs.contains("splitting the job into block tasks"));
+    assert!(
+        logs.contains("prepare by byte ranges over the workers"),
+        "{logs}"
+    );
     assert_same_mesh(&out, &local);
     let (rep, lrep) = (report(&rep_path), report(&dir.join("local-graph.json")));
     assert_eq!(rep["mesh"], lrep["mesh"]);
@@ -120,6 +141,15 @@ fn a_large_job_within_its_budget_spreads_over_idle_workers_with_the_local_graph_
             .count();
         assert_eq!(n, 9, "{pass}tasks");
     }
+    // One clean-up task per block, and the passes' tasks on both workers.
+    assert!(tasks.iter().any(|t| t["task"] == "clean-up 0"));
+    for pass in ["survey range ", "route range ", "clean-up "] {
+        let on: std::collections::BTreeSet<&str> = (tasks.iter())
+            .filter(|t| t["task"].as_str().unwrap().starts_with(pass))
+            .map(|t| t["worker"].as_str().unwrap())
+            .collect();
+        assert_eq!(on.len(), 2, "{pass}tasks ran on {on:?}");
+    }
     let ran: std::collections::BTreeSet<&str> = (rep["tasks"].as_array().unwrap().iter())
         .map(|t| t["worker"].as_str().unwrap())
         .collect();
@@ -133,7 +163,7 @@ fn a_spread_job_survives_a_worker_killed_mid_block() {
     };
     let dir = tmp.path();
     let mut ws: Vec<Proc> = (1..=3)
-        .map(|i| worker_with(&nats, dir, &format!("w{i}"), 1, &SPREAD))
+        .map(|i| worker_with(&nats, dir, &format!("w{i}"), 1, &SPREAD_BY_RANGES))
         .collect();
     let (_api, a) = serve(&nats, dir, "api");
     let (cloud, local) = torus_and_local_graph_run(dir);

@@ -174,11 +174,17 @@ pub(super) fn read<E>(
     let mut pos = seek_line(l, &mut **r, range.start, src)?;
     let mut raw = Vec::new();
     let c = l.cols;
+    // A window of the input cannot count the lines before it: the error then names the byte
+    // the line begins at.
     let err = |r: &mut Box<dyn Source + '_>, at: u64, message: String| {
+        let (line, message) = match line_at(&mut **r, at, src) {
+            Ok(line) => (line, message),
+            Err(_) => (0, format!("{message} (in the line beginning at byte {at})")),
+        };
         Ok::<_, IoError>(IoError::Parse {
             path: src.to_path_buf(),
             format: l.fmt,
-            line: line_at(&mut **r, at, src)?,
+            line,
             message,
         })
     };

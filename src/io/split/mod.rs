@@ -22,6 +22,9 @@ mod lines;
 mod records;
 #[cfg(test)]
 mod tests;
+mod window;
+
+pub(crate) use window::Window;
 
 use std::io::{BufRead, BufReader, Cursor, Seek};
 use std::path::{Path, PathBuf};
@@ -64,9 +67,16 @@ pub(crate) type ChunkConsumer<'f, E> =
 trait Source: BufRead + Seek {}
 impl<T: BufRead + Seek> Source for T {}
 
-fn open<'a>(input: StreamInput<'a>) -> Result<Box<dyn Source + 'a>, IoError> {
+/// Where a split reads: the input, or a window of it.
+#[derive(Clone, Copy)]
+enum Origin<'a> {
+    Input(StreamInput<'a>),
+    Window(Window<'a>),
+}
+
+fn open<'a>(input: Origin<'a>) -> Result<Box<dyn Source + 'a>, IoError> {
     match input {
-        StreamInput::File(path) => {
+        Origin::Input(StreamInput::File(path)) => {
             let f = std::fs::File::open(path).map_err(|source| IoError::Open {
                 path: path.to_path_buf(),
                 source,
@@ -76,7 +86,8 @@ fn open<'a>(input: StreamInput<'a>) -> Result<Box<dyn Source + 'a>, IoError> {
                 f,
             )))
         }
-        StreamInput::Bytes { data, .. } => Ok(Box::new(Cursor::new(data))),
+        Origin::Input(StreamInput::Bytes { data, .. }) => Ok(Box::new(Cursor::new(data))),
+        Origin::Window(w) => Ok(Box::new(window::WindowReader::new(w))),
     }
 }
 
@@ -107,6 +118,29 @@ pub(crate) fn split_input(
             (data.len() as u64, format)
         }
     };
+    plan_split(Origin::Input(input), len, format, limits, range_bytes, src)
+}
+
+/// [`split_input`] for an input of which only the window `w` is held: the header must lie in
+/// it (a window that begins the input and holds its first megabytes). The input's size was
+/// checked against the limits when it was stored.
+pub(crate) fn split_window(
+    w: Window<'_>,
+    limits: &ReadLimits,
+    range_bytes: u64,
+) -> Result<Option<Split>, IoError> {
+    let src = Path::new(super::MEMORY_SOURCE).to_path_buf();
+    plan_split(Origin::Window(w), w.len, w.format, limits, range_bytes, src)
+}
+
+fn plan_split(
+    input: Origin<'_>,
+    len: u64,
+    format: PointFormat,
+    limits: &ReadLimits,
+    range_bytes: u64,
+    src: PathBuf,
+) -> Result<Option<Split>, IoError> {
     let range_bytes = range_bytes.max(1);
     let r = open(input)?;
     let layout = match format {
@@ -212,6 +246,41 @@ impl Split {
     pub(crate) fn read_range<E: From<IoError>>(
         &self,
         input: StreamInput<'_>,
+        r: usize,
+        chunk_points: usize,
+        f: &mut ChunkConsumer<'_, E>,
+    ) -> Result<(), E> {
+        self.read_from(Origin::Input(input), r, chunk_points, f)
+    }
+
+    /// [`Split::read_range`] from a window of the input that holds the range (and, for text,
+    /// the byte before it and the end of its last line: see [`Split::window_bounds`]).
+    pub(crate) fn read_window<E: From<IoError>>(
+        &self,
+        w: Window<'_>,
+        r: usize,
+        chunk_points: usize,
+        f: &mut ChunkConsumer<'_, E>,
+    ) -> Result<(), E> {
+        self.read_from(Origin::Window(w), r, chunk_points, f)
+    }
+
+    /// The bytes a window must hold to read range `r`: the range, and for text the byte before
+    /// it (whether a line begins at its start) and `slack` bytes after it (its last line).
+    pub(crate) fn window_bounds(&self, r: usize, slack: u64) -> ByteRange {
+        let range = self.ranges[r];
+        match self.layout {
+            Layout::Lines(_) => ByteRange {
+                start: range.start.saturating_sub(1),
+                end: range.end.saturating_add(slack),
+            },
+            _ => range,
+        }
+    }
+
+    fn read_from<E: From<IoError>>(
+        &self,
+        input: Origin<'_>,
         r: usize,
         chunk_points: usize,
         f: &mut ChunkConsumer<'_, E>,

@@ -254,6 +254,175 @@ fn spill_dir(options: &TiledOptions) -> Result<tempfile::TempDir, ReconError> {
         })
 }
 
+/// What the survey decides before the partition: the normalisation, the duplicate tolerance,
+/// the normalised subsample and bounds, an analytic carrier (fitted once), the block cores and
+/// the partition's first margin (normalised units).
+pub(crate) struct Routes {
+    pub normalization: Normalization,
+    pub tol: f64,
+    pub sample: Vec<Point3>,
+    pub bounds: Aabb,
+    analytic: Option<CarrierPlan>,
+    pub cores: Vec<Aabb>,
+    pub margin: f64,
+}
+
+/// Step 1's decisions from the survey `s` (see the module doc); `block_points` bounds the core
+/// points per block.
+pub(crate) fn plan_routes(
+    s: &Survey,
+    params: &ReconParams,
+    options: &TiledOptions,
+    block_points: usize,
+) -> Result<Routes, ReconError> {
+    let kind = carrier_kind(params, s.has_normals)?;
+    let normalization = Normalization::from_aabb(&s.bbox);
+    let tol = if params.clean.merge_tolerance > 0.0 {
+        (params.clean.merge_tolerance * s.bbox.diagonal() * normalization.scale)
+            .max(f64::MIN_POSITIVE)
+    } else {
+        0.0
+    };
+    let sample: Vec<Point3> = s.points.iter().map(|p| normalization.forward(p)).collect();
+    check_degenerate(&sample, s.has_normals)?;
+    let bounds = Aabb {
+        min: normalization.forward(&s.bbox.min),
+        max: normalization.forward(&s.bbox.max),
+    };
+    // Analytic carriers do not depend on the support; the local one is built after the
+    // partition.
+    let analytic = match kind {
+        CarrierKind::Sphere | CarrierKind::Ellipsoid => {
+            Some(plan_carrier(&sample, None, params, 1.0)?.0)
+        }
+        _ => None,
+    };
+    let cores = plan_leaves(&sample, &bounds, (block_points / s.step).max(1), true);
+    let mut routes = Routes {
+        normalization,
+        tol,
+        sample,
+        bounds,
+        analytic,
+        cores,
+        margin: 0.0,
+    };
+    let rough = rough_support(&routes.sample, s.step, params)?;
+    routes.margin = MARGIN_FACTOR * routes.exact_reach(params, options, &rough)?;
+    Ok(routes)
+}
+
+impl Routes {
+    /// How far beyond its core a block's stored points must reach for `support`.
+    pub(crate) fn exact_reach(
+        &self,
+        params: &ReconParams,
+        options: &TiledOptions,
+        support: &SupportEstimate,
+    ) -> Result<f64, ReconError> {
+        let placeholder = CarrierPlan::Local { winding: None };
+        let shape = self.analytic.as_ref().unwrap_or(&placeholder);
+        let grid = grid_for(params, options, &self.bounds, shape, support)?;
+        Ok(reach(params, support.radius, grid.h, self.tol))
+    }
+
+    /// The margin the partition must be written again with when `support` needs more than the
+    /// current one (`None`: the current one suffices).
+    pub(crate) fn wider_margin(
+        &self,
+        params: &ReconParams,
+        options: &TiledOptions,
+        support: &SupportEstimate,
+    ) -> Result<Option<f64>, ReconError> {
+        let needed = self.exact_reach(params, options, support)?;
+        Ok((needed > self.margin).then_some(MARGIN_FACTOR * needed))
+    }
+}
+
+/// How each block's point set is made from its spill (step 4), decided after the estimates.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct CleanSpec {
+    /// Outer box of a block: its core inflated by this (normalised units).
+    pub overlap: f64,
+    /// Extra reach of every stored point set beyond its outer box.
+    pub halo: f64,
+    /// Duplicate tolerance.
+    pub tol: f64,
+    pub normals: bool,
+    /// Negate the normals (they point inwards).
+    pub flip: bool,
+    /// The noise level σ when the noise estimate calls the cloud noisy: its strays are dropped.
+    pub stray_sigma: Option<f64>,
+}
+
+/// Steps 3 (after the estimates) and 4's plan: the carrier, the grid, the halo; the plan has
+/// no blocks yet and its clean-up counts are the survey's (see [`complete_plan`]).
+pub(crate) fn plan_after_partition(
+    s: &Survey,
+    routes: Routes,
+    support: SupportEstimate,
+    noise: NoiseEstimate,
+    params: &ReconParams,
+    options: &TiledOptions,
+) -> Result<(Plan, CleanSpec), ReconError> {
+    let resolved = params.resolved_for(&noise);
+    let mut sample_normals = s.has_normals.then(|| s.normals.clone());
+    let (carrier, carrier_kind, normals_flipped) = plan_carrier(
+        &routes.sample,
+        sample_normals.as_mut(),
+        &resolved,
+        support.radius,
+    )?;
+    let grid = grid_for(params, options, &routes.bounds, &carrier, &support)?;
+    let halo = 3.0 * support.radius + 4.0 * grid.h;
+    let spec = CleanSpec {
+        overlap: 3.0 * coarsest(params, support.radius),
+        halo,
+        tol: routes.tol,
+        normals: s.has_normals,
+        flip: normals_flipped,
+        stray_sigma: noise.noisy.then_some(noise.sigma),
+    };
+    let plan = Plan {
+        normalization: routes.normalization,
+        support,
+        noise,
+        params: resolved,
+        blocks: Vec::new(),
+        halo,
+        carrier,
+        grid,
+        sample: routes.sample,
+        sample_normals,
+        clean: clean_stats(s, &route::Dropped::default()),
+        normals_flipped,
+        carrier_kind,
+    };
+    Ok((plan, spec))
+}
+
+/// The plan with its blocks and what their clean-up dropped.
+pub(crate) fn complete_plan(plan: &mut Plan, blocks: Vec<BlockBox>, dropped: &route::Dropped) {
+    plan.blocks = blocks;
+    plan.clean.used -= dropped.merged + dropped.strays;
+    plan.clean.merged_duplicates = dropped.merged;
+    plan.clean.strays_removed = dropped.strays;
+}
+
+/// The input's clean-up counts from the survey and what the blocks dropped.
+fn clean_stats(s: &Survey, dropped: &route::Dropped) -> CleanStats {
+    CleanStats {
+        points: s.total,
+        used: s.finite - dropped.merged - dropped.strays,
+        dropped_non_finite: s.total - s.finite,
+        merged_duplicates: dropped.merged,
+        strays_removed: dropped.strays,
+        has_normals: s.has_normals,
+        invalid_normals: s.invalid_normals,
+        ..Default::default()
+    }
+}
+
 /// The partition, written again with a wider margin when the exact reach needs it.
 struct Partition {
     dir: tempfile::TempDir,
@@ -264,56 +433,62 @@ struct Partition {
 }
 
 /// Steps 2 and 3 of the module doc.
-#[allow(clippy::too_many_arguments)]
 fn partition(
     scan: &Scan<'_>,
     s: &Survey,
-    cores: &[Aabb],
-    normalization: &Normalization,
-    margin: f64,
-    tol: f64,
-    exact_reach: impl Fn(&SupportEstimate) -> Result<f64, ReconError>,
+    routes: &mut Routes,
     params: &ReconParams,
     options: &TiledOptions,
 ) -> Result<Partition, ReconError> {
     // Route every point into a fresh spill folder with the given margin.
     let spill = |margin: f64| {
         let dir = spill_dir(options)?;
-        let routing = Routing::new(cores, margin, normalization, s.has_normals, dir.path());
-        let routed = scan.route(&routing, cores.len())?;
+        let routing = Routing::new(
+            &routes.cores,
+            margin,
+            &routes.normalization,
+            s.has_normals,
+            dir.path(),
+        );
+        let routed = scan.route(&routing, routes.cores.len())?;
         Ok::<_, ReconError>((dir, routed))
     };
-    let (dir, routed) = spill(margin)?;
-    let alive: Vec<usize> = (0..cores.len())
-        .filter(|&b| routed.core_points[b] > 0)
-        .collect();
+    let (dir, routed) = spill(routes.margin)?;
+    let alive = alive_blocks(&routed);
     let picks = patches::pick_patches(&alive, &routed.spilled);
     let (support, noise) = patches::estimate_on_patches(
         (dir.path(), scan.parts()),
         &picks,
-        cores,
+        &routes.cores,
         s.has_normals,
-        tol,
+        routes.tol,
         s.finite,
         params,
     )?;
-    let needed = exact_reach(&support)?;
-    if needed <= margin {
+    let Some(wider) = routes.wider_margin(params, options, &support)? else {
         return Ok(Partition {
             dir,
             alive,
             support,
             noise,
         });
-    }
+    };
     drop(dir);
-    let (dir, _) = spill(MARGIN_FACTOR * needed)?;
+    let (dir, _) = spill(wider)?;
+    routes.margin = wider;
     Ok(Partition {
         dir,
         alive,
         support,
         noise,
     })
+}
+
+/// The provisional blocks with points in their cores, ascending: the blocks of the plan.
+pub(crate) fn alive_blocks(routed: &route::Routed) -> Vec<usize> {
+    (0..routed.core_points.len())
+        .filter(|&b| routed.core_points[b] > 0)
+        .collect()
 }
 
 /// Run the first step over `input` (see the module doc); writes `points/{b}` for every block to
@@ -330,119 +505,75 @@ pub(crate) fn prepare(
     progress.stage(Stage::Clean);
     let mut scan = Scan::new(input, options.split, &options.worker)?;
     let s = scan.survey(SAMPLE_POINTS)?;
-    let kind = carrier_kind(params, s.has_normals)?;
-    let normalization = Normalization::from_aabb(&s.bbox);
-    let tol = if params.clean.merge_tolerance > 0.0 {
-        (params.clean.merge_tolerance * s.bbox.diagonal() * normalization.scale)
-            .max(f64::MIN_POSITIVE)
-    } else {
-        0.0
-    };
-    let sample: Vec<Point3> = s.points.iter().map(|p| normalization.forward(p)).collect();
-    check_degenerate(&sample, s.has_normals)?;
-    let bounds = Aabb {
-        min: normalization.forward(&s.bbox.min),
-        max: normalization.forward(&s.bbox.max),
-    };
+    let mut routes = plan_routes(&s, params, options, block_points)?;
     super::super::check_cancel(progress)?;
     progress.stage(Stage::Index);
-    // Analytic carriers do not depend on the support; the local one is built below.
-    let analytic = match kind {
-        CarrierKind::Sphere | CarrierKind::Ellipsoid => {
-            Some(plan_carrier(&sample, None, params, 1.0)?.0)
-        }
-        _ => None,
-    };
-    let placeholder = CarrierPlan::Local { winding: None };
-    let shape = analytic.as_ref().unwrap_or(&placeholder);
-    let exact_reach = |support: &SupportEstimate| -> Result<f64, ReconError> {
-        let grid = grid_for(params, options, &bounds, shape, support)?;
-        Ok(reach(params, support.radius, grid.h, tol))
-    };
-    let rough = rough_support(&sample, s.step, params)?;
-    let margin = MARGIN_FACTOR * exact_reach(&rough)?;
-    let cores = plan_leaves(&sample, &bounds, (block_points / s.step).max(1), true);
-    let part = partition(
-        &scan,
-        &s,
-        &cores,
-        &normalization,
-        margin,
-        tol,
-        exact_reach,
-        params,
-        options,
-    )?;
+    let part = partition(&scan, &s, &mut routes, params, options)?;
     super::super::check_cancel(progress)?;
-    let (support, noise) = (part.support, part.noise);
-    let resolved = params.resolved_for(&noise);
     progress.stage(Stage::Carrier);
-    let mut sample_normals = s.has_normals.then(|| s.normals.clone());
-    let (carrier, carrier_kind, normals_flipped) =
-        plan_carrier(&sample, sample_normals.as_mut(), &resolved, support.radius)?;
-    let grid = grid_for(params, options, &bounds, &carrier, &support)?;
-    let halo = 3.0 * support.radius + 4.0 * grid.h;
-    let overlap = 3.0 * coarsest(params, support.radius);
+    let cores = routes.cores.clone();
+    let (mut plan, spec) =
+        plan_after_partition(&s, routes, part.support, part.noise, params, options)?;
     let out = BlockOutput {
         dir: part.dir.path(),
         parts: scan.parts(),
         cores: &cores,
-        overlap,
-        halo,
-        tol,
-        normals: s.has_normals,
-        flip: normals_flipped,
-        stray_sigma: noise.noisy.then_some(noise.sigma),
+        spec,
     };
     let (blocks, dropped) = scan.timed("clean-up".into(), || {
         write_blocks(&out, &part.alive, store, progress)
     })?;
-    let clean = CleanStats {
-        points: s.total,
-        used: s.finite - dropped.merged - dropped.strays,
-        dropped_non_finite: s.total - s.finite,
-        merged_duplicates: dropped.merged,
-        strays_removed: dropped.strays,
-        has_normals: s.has_normals,
-        invalid_normals: s.invalid_normals,
-        ..Default::default()
-    };
-    let plan = Plan {
-        normalization,
-        support,
-        noise,
-        params: resolved,
-        blocks,
-        halo,
-        carrier,
-        grid,
-        sample,
-        sample_normals,
-        clean,
-        normals_flipped,
-        carrier_kind,
-    };
+    complete_plan(&mut plan, blocks, &dropped);
     Ok((plan, scan.take_tasks()))
 }
 
 /// What turning spill files into block point sets needs.
-struct BlockOutput<'a> {
-    dir: &'a std::path::Path,
+pub(crate) struct BlockOutput<'a> {
+    pub dir: &'a std::path::Path,
     /// Spill parts per block.
-    parts: usize,
+    pub parts: usize,
     /// The provisional cores (spill file `b` is core `b`'s).
-    cores: &'a [Aabb],
-    overlap: f64,
-    halo: f64,
-    tol: f64,
-    normals: bool,
-    flip: bool,
-    /// The noise level σ when the noise estimate calls the cloud noisy: its strays are dropped.
-    stray_sigma: Option<f64>,
+    pub cores: &'a [Aabb],
+    pub spec: CleanSpec,
 }
 
-/// Step 4: block `k` is the `k`-th of `alive`; its point set is every kept point within its
-/// outer box plus the halo. Returns the blocks and what was dropped in all.
+/// Step 4 for one block: block `k` of the plan is provisional block `prov`; its point set is
+/// every kept point within its outer box plus the halo, written to `store` as `points/{k}`; its
+/// spill is removed. Returns the block and what was dropped.
+pub(crate) fn write_block(
+    out: &BlockOutput<'_>,
+    k: usize,
+    prov: usize,
+    store: &Store,
+) -> Result<(BlockBox, route::Dropped), ReconError> {
+    let spec = &out.spec;
+    let records = route::read_block_spill(out.dir, prov, out.parts, spec.normals)?;
+    let core = out.cores[prov];
+    let outer = core.inflated(spec.overlap);
+    let reach = outer.inflated(spec.halo);
+    let owns = |p: &Point3| out.cores.iter().position(|c| c.contains(p)) == Some(prov);
+    let (set, dropped) = route::finish_block(
+        &records,
+        &reach,
+        spec.tol,
+        spec.normals,
+        spec.flip,
+        spec.stray_sigma,
+        owns,
+    )?;
+    drop(records);
+    route::remove_block_spill(out.dir, prov, out.parts);
+    let members = set.points.iter().filter(|p| outer.contains(p)).count();
+    store.put(&block_key(k), set.encode())?;
+    let block = BlockBox {
+        core,
+        outer,
+        members,
+    };
+    Ok((block, dropped))
+}
+
+/// Step 4: block `k` is the `k`-th of `alive`. Returns the blocks and what was dropped in all.
 fn write_blocks(
     out: &BlockOutput<'_>,
     alive: &[usize],
@@ -451,34 +582,9 @@ fn write_blocks(
 ) -> Result<(Vec<BlockBox>, route::Dropped), ReconError> {
     let results: Vec<Result<(BlockBox, route::Dropped), ReconError>> =
         (alive.par_iter().enumerate())
-            .map(|(b, &prov)| {
+            .map(|(k, &prov)| {
                 super::super::check_cancel(progress)?;
-                let records = route::read_block_spill(out.dir, prov, out.parts, out.normals)?;
-                let core = out.cores[prov];
-                let outer = core.inflated(out.overlap);
-                let reach = outer.inflated(out.halo);
-                let owns = |p: &Point3| out.cores.iter().position(|c| c.contains(p)) == Some(prov);
-                let (set, dropped) = route::finish_block(
-                    &records,
-                    &reach,
-                    out.tol,
-                    out.normals,
-                    out.flip,
-                    out.stray_sigma,
-                    owns,
-                )?;
-                drop(records);
-                route::remove_block_spill(out.dir, prov, out.parts);
-                let members = set.points.iter().filter(|p| outer.contains(p)).count();
-                store.put(&block_key(b), set.encode())?;
-                Ok((
-                    BlockBox {
-                        core,
-                        outer,
-                        members,
-                    },
-                    dropped,
-                ))
+                write_block(out, k, prov, store)
             })
             .collect();
     let mut blocks = Vec::with_capacity(results.len());

@@ -113,12 +113,13 @@ pub async fn create_job(
     };
     let (options, params, wait) = parse_params(&pairs, cfg)?;
     let size = bytes.len() as u64;
-    let (bytes, format, points) = check_cloud(&st, bytes, hint, &params).await?;
+    let (bytes, format, points, attributes) = check_cloud(&st, bytes, hint, &params).await?;
     let info = InputInfo {
         format: format.name().to_string(),
         file: format!("input.{}", input_ext(format)),
         bytes: size,
         points,
+        attributes: Some(attributes),
     };
     let jobs = st.jobs.clone();
     let job = tokio::task::spawn_blocking(move || jobs.submit(&bytes, info, &options))

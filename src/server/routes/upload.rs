@@ -223,7 +223,7 @@ pub async fn check_cloud(
     bytes: Vec<u8>,
     hint: Option<PointFormat>,
     params: &crate::ReconParams,
-) -> Result<(Vec<u8>, PointFormat, usize), ApiError> {
+) -> Result<(Vec<u8>, PointFormat, usize, crate::job::InputAttributes), ApiError> {
     let cfg = st.jobs.config();
     let limits = ReadLimits {
         max_points: cfg.max_points,
@@ -251,7 +251,8 @@ pub async fn check_cloud(
             Err(_) if graph && out_of_core() => {}
             r => r?,
         }
-        Ok((bytes, format, cloud.points.len()))
+        let attributes = crate::job::InputAttributes::of(&cloud);
+        Ok((bytes, format, cloud.points.len(), attributes))
     })
     .await
     .map_err(|e| ApiError::internal(format!("upload check failed: {e}")))?

@@ -76,6 +76,7 @@ async fn submit(
         file: REQUEST_FILE.to_string(),
         bytes: bytes.len() as u64,
         points: 0,
+        attributes: None,
     };
     let jobs = st.jobs.clone();
     let options = crate::params::ReconOptions::default();
