@@ -6,9 +6,13 @@
 REPORT.json is the report of a task-graph job run by `rbfsurf serve --nats` workers (it has
 `tasks[]`, `blocks[]`, `input.used`). The model, from the measured tasks:
 
-* prepare: one task that streams the whole input, so its time grows with the input:
-  t_prepare(N) = (measured prepare seconds / measured points) * N.  A prepare split over byte
-  ranges would divide this by the nodes; both columns are given.
+* prepare, when the report's prepare ran over the workers by byte ranges (it has `clean-up <k>`
+  tasks): each phase (survey, sample, route range tasks, clean-up tasks) is work that grows with
+  N spread over K * S slots plus its slowest task; the steps between the phases (number ranges,
+  plan blocks, estimates, complete plan) read bounded values and are taken as measured.
+  Otherwise prepare is one task that streams the whole input, so its time grows with the input:
+  t_prepare(N) = (measured prepare seconds / measured points) * N, and a prepare split over
+  byte ranges would divide this by the nodes; both columns are given.
 * blocks: the plan's block size depends on the memory budget only, so the number of blocks grows
   with N and each costs what the measured ones cost. Work = (sum of block seconds / points) * N,
   spread over K * S slots, plus one slowest block (the last one to start):
@@ -60,19 +64,33 @@ def main():
           f"critical path {cp.get('seconds', 0):.1f} s of {cp.get('wall_seconds', 0):.1f} s wall; "
           f"block peak RSS {peak:.0f} MiB")
     print()
-    print("| points | nodes | prepare (one task) | blocks | regions | merge | total, one prepare "
+    print("| points | nodes | prepare | blocks | regions | merge | total, one prepare "
           "| total, prepare split | memory per node |")
     print("|---|---|---|---|---|---|---|---|---|")
     s = a.slots_per_node
+    spread = any(t["task"].startswith("clean-up ") for t in tasks)
+    passes = [[t["seconds"] for t in phase(tasks, p)]
+              for p in ("survey range", "sample range", "route range", "clean-up")]
+    between = sum(t["seconds"] for p in ("number ranges", "plan blocks", "estimates", "complete plan")
+                  for t in phase(tasks, p))
+    if spread:
+        print(f"prepare over the workers: pass tasks {[len(p) for p in passes]}, sums "
+              f"{[round(sum(p), 2) for p in passes]} s, slowest {[round(max(p), 2) for p in passes]} s, "
+              f"steps between {between:.2f} s")
     for pts in (float(x) for x in a.points.split(",")):
         scale = pts / n
         for k in (int(x) for x in a.nodes.split(",")):
-            t_prep = prep * scale
+            if spread:
+                t_prep = between + sum(sum(p) * scale / (k * s) + max(p) for p in passes)
+                t_split = t_prep
+            else:
+                t_prep = prep * scale
+                t_split = t_prep / k
             t_blocks = sum(blocks) * scale / (k * s) + max(blocks)
             t_regions = sum(regions) * scale / (k * s) + max(regions)
             t_merge = merge * scale
             one = t_prep + t_blocks + t_regions + t_merge
-            split = t_prep / k + t_blocks + t_regions + t_merge
+            split = t_split + t_blocks + t_regions + t_merge
             print(f"| {pts:.0e} | {k} | {t_prep / 60:.1f} min | {t_blocks / 60:.1f} min | "
                   f"{t_regions / 60:.1f} min | {t_merge / 60:.1f} min | {one / 60:.1f} min | "
                   f"{split / 60:.1f} min | {s * peak / 1024:.1f} GiB |")

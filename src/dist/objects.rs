@@ -8,6 +8,7 @@
 use super::DistError;
 use super::connect::{OBJECT_BUCKET, Resources};
 use crate::error::StoreError;
+use crate::io::split::ByteRange;
 use crate::pipeline::tiled::store::RemoteStore;
 use async_nats::jetstream::object_store::{self, ObjectStore};
 use std::time::Duration;
@@ -139,6 +140,63 @@ pub async fn remove(res: &Resources, job: Uuid, keys: &[String]) -> Result<(), D
 fn base64_url(bytes: &[u8]) -> String {
     use base64::Engine;
     base64::engine::general_purpose::URL_SAFE.encode(bytes)
+}
+
+/// Bytes per stored segment of a job's input (the last one shorter).
+pub const SEGMENT_BYTES: u64 = 8 << 20;
+
+/// The segment keys of an input `file` of `bytes` bytes (one at least).
+pub fn input_keys(file: &str, bytes: u64) -> Vec<String> {
+    let n = bytes.div_ceil(SEGMENT_BYTES).max(1);
+    (0..n).map(|k| format!("{file}/{k}")).collect()
+}
+
+/// Stores job `job`'s input `file` in segments.
+pub async fn put_input(
+    os: &ObjectStore,
+    job: Uuid,
+    file: &str,
+    data: &[u8],
+) -> Result<(), DistError> {
+    for (k, key) in input_keys(file, data.len() as u64).iter().enumerate() {
+        let a = (k as u64 * SEGMENT_BYTES) as usize;
+        let b = (a + SEGMENT_BYTES as usize).min(data.len());
+        put(os, &name(job, key), &data[a..b]).await?;
+    }
+    Ok(())
+}
+
+/// The bytes `range` of job `job`'s input `file` (`bytes` long), as a window: the segments that
+/// hold them, and the offset of the first.
+pub async fn get_input_range(
+    os: &ObjectStore,
+    job: Uuid,
+    file: &str,
+    bytes: u64,
+    range: ByteRange,
+) -> Result<(u64, Vec<u8>), DistError> {
+    let keys = input_keys(file, bytes);
+    let first = (range.start / SEGMENT_BYTES) as usize;
+    let last = ((range.end.max(range.start + 1) - 1) / SEGMENT_BYTES) as usize;
+    let mut out = Vec::new();
+    for key in &keys[first.min(keys.len() - 1)..=last.min(keys.len() - 1)] {
+        out.extend(get(os, &name(job, key)).await?);
+    }
+    Ok((first as u64 * SEGMENT_BYTES, out))
+}
+
+/// The whole input of job `job`.
+pub async fn get_input(
+    os: &ObjectStore,
+    job: Uuid,
+    file: &str,
+    bytes: u64,
+) -> Result<Vec<u8>, DistError> {
+    let all = ByteRange {
+        start: 0,
+        end: bytes.max(1),
+    };
+    Ok(get_input_range(os, job, file, bytes, all).await?.1)
 }
 
 /// The keys of the task graph's intermediate values of a graph with `blocks` blocks and

@@ -1,7 +1,7 @@
 //! Prepare spread over the workers: a task graph's survey, subsample and partition run as one
 //! task per byte range of the input, and the blocks' clean-up as one task per block
 //! ([`crate::pipeline::tiled::phases`]), so that no task reads the whole input. The input is
-//! stored in segments of [`SEGMENT_BYTES`]; a range task fetches the first segment (the header:
+//! stored in segments of [`objects::SEGMENT_BYTES`]; a range task fetches the first segment (the header:
 //! the split is planned from it) and the segments around its range.
 //!
 //! The phases' progress is the record `prep.<id>` (phase, generation, a done flag per task, the
@@ -29,69 +29,12 @@ use crate::params::ReconParams;
 use crate::pipeline::tiled::phases::{self, AfterRoutes, RangeInput};
 use crate::pipeline::tiled::store::Store;
 use crate::pipeline::tiled::{self, TiledOptions};
+use crate::pipeline::{Execution, plan_execution};
 use crate::progress::Stage;
 use crate::report::TaskReport;
-use async_nats::jetstream::object_store::ObjectStore;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use uuid::Uuid;
-
-/// Bytes per stored segment of a job's input (the last one shorter).
-pub const SEGMENT_BYTES: u64 = 8 << 20;
-
-/// The segment keys of an input `file` of `bytes` bytes (one at least).
-pub fn input_keys(file: &str, bytes: u64) -> Vec<String> {
-    let n = bytes.div_ceil(SEGMENT_BYTES).max(1);
-    (0..n).map(|k| format!("{file}/{k}")).collect()
-}
-
-/// Stores job `job`'s input `file` in segments.
-pub async fn put_input(
-    os: &ObjectStore,
-    job: Uuid,
-    file: &str,
-    data: &[u8],
-) -> Result<(), DistError> {
-    for (k, key) in input_keys(file, data.len() as u64).iter().enumerate() {
-        let a = (k as u64 * SEGMENT_BYTES) as usize;
-        let b = (a + SEGMENT_BYTES as usize).min(data.len());
-        objects::put(os, &objects::name(job, key), &data[a..b]).await?;
-    }
-    Ok(())
-}
-
-/// The bytes `range` of job `job`'s input `file` (`bytes` long), as a window: the segments that
-/// hold them, and the offset of the first.
-pub async fn get_input_range(
-    os: &ObjectStore,
-    job: Uuid,
-    file: &str,
-    bytes: u64,
-    range: ByteRange,
-) -> Result<(u64, Vec<u8>), DistError> {
-    let keys = input_keys(file, bytes);
-    let first = (range.start / SEGMENT_BYTES) as usize;
-    let last = ((range.end.max(range.start + 1) - 1) / SEGMENT_BYTES) as usize;
-    let mut out = Vec::new();
-    for key in &keys[first.min(keys.len() - 1)..=last.min(keys.len() - 1)] {
-        out.extend(objects::get(os, &objects::name(job, key)).await?);
-    }
-    Ok((first as u64 * SEGMENT_BYTES, out))
-}
-
-/// The whole input of job `job`.
-pub async fn get_input(
-    os: &ObjectStore,
-    job: Uuid,
-    file: &str,
-    bytes: u64,
-) -> Result<Vec<u8>, DistError> {
-    let all = ByteRange {
-        start: 0,
-        end: bytes.max(1),
-    };
-    Ok(get_input_range(os, job, file, bytes, all).await?.1)
-}
 
 /// A phase of the spread prepare.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -163,9 +106,9 @@ pub(super) fn plan_split(
     let input = &rec.view.input;
     let first = ByteRange {
         start: 0,
-        end: SEGMENT_BYTES.min(input.bytes).max(1),
+        end: objects::SEGMENT_BYTES.min(input.bytes).max(1),
     };
-    let (_, header) = ctx.block_on(get_input_range(
+    let (_, header) = ctx.block_on(objects::get_input_range(
         &ctx.res.objects,
         rec.view.id,
         &input.file,
@@ -181,6 +124,46 @@ pub(super) fn plan_split(
     let split = split_window(w, &limits(rec, params), range_bytes)
         .map_err(|e| recon_error(ReconError::Read(e)))?;
     Ok(split.filter(|s| s.ranges().len() > 1).map(|s| (header, s)))
+}
+
+/// A job the task graph can run, whose input splits into byte ranges and whose record knows its
+/// points and attributes: the prepare runs over the workers ([`super::prepare`]), and the start
+/// task reads only the input's first segment. `None`: the start task goes on with the input.
+pub(super) fn start_by_ranges(
+    ctx: &Ctx,
+    rec: &JobRecord,
+    params: &ReconParams,
+    started_ms: u64,
+) -> Result<Option<Result<(), TaskError>>, TaskError> {
+    let input = &rec.view.input;
+    let (tiled::InputSplit::Bytes(range_bytes), Some(attrs)) = (ctx.split, input.attributes) else {
+        return Ok(None);
+    };
+    if input.bytes <= range_bytes {
+        return Ok(None);
+    }
+    let n = input.points as u64;
+    let spread = match plan_execution(n, params).map_err(recon_error)? {
+        Execution::OutOfCore(_) => false,
+        Execution::InMemory => {
+            if super::spread::spread_over(ctx, n, params, attrs)?.is_none() {
+                return Ok(None);
+            }
+            true
+        }
+    };
+    let Some((_, split)) = plan_split(ctx, rec, params, range_bytes)? else {
+        return Ok(None);
+    };
+    Ok(Some(start(
+        ctx,
+        rec,
+        params,
+        &split,
+        range_bytes,
+        spread,
+        started_ms,
+    )))
 }
 
 /// Starts the spread prepare of job `rec` over the ranges of `split`: the survey tasks.
@@ -334,11 +317,11 @@ fn run_item(
         let (header, split) = plan_split(ctx, rec, params, state.range_bytes)?
             .ok_or_else(|| TaskError::Retry("the input no longer splits".into()))?;
         let input = &rec.view.input;
-        let bounds = split.window_bounds(k, SEGMENT_BYTES);
-        let (base, data) = if bounds.end <= SEGMENT_BYTES {
+        let bounds = split.window_bounds(k, objects::SEGMENT_BYTES);
+        let (base, data) = if bounds.end <= objects::SEGMENT_BYTES {
             (0, header)
         } else {
-            ctx.block_on(get_input_range(
+            ctx.block_on(objects::get_input_range(
                 &ctx.res.objects,
                 job,
                 &input.file,

@@ -55,7 +55,7 @@ impl JobBackend for NatsJobs {
         let job = view.id;
         self.rt
             .block_on(async {
-                super::prepare::put_input(&self.res.objects, job, &view.input.file, input).await?;
+                objects::put_input(&self.res.objects, job, &view.input.file, input).await?;
                 records::create(&self.res.jobs, &job_key(job), &record).await?;
                 let start = Task {
                     job,
@@ -133,7 +133,7 @@ async fn purge(res: &Resources, id: Uuid, cutoff: Option<u64>) -> Result<bool, D
         .map(|f| format!("result/{f}"))
         .collect();
     let input = &rec.view.input;
-    keys.extend(super::prepare::input_keys(&input.file, input.bytes));
+    keys.extend(objects::input_keys(&input.file, input.bytes));
     objects::remove(res, id, &keys).await?;
     let store = Store::Remote(Box::new(JobObjects {
         os: res.objects.clone(),

@@ -235,11 +235,11 @@ fn start(
     {
         return volume(ctx, rec, progress);
     }
-    if let Some(r) = start_by_ranges(ctx, rec, params, started_ms)? {
+    if let Some(r) = super::prepare::start_by_ranges(ctx, rec, params, started_ms)? {
         return r;
     }
     let input = &rec.view.input;
-    let data = ctx.block_on(super::prepare::get_input(
+    let data = ctx.block_on(objects::get_input(
         &ctx.res.objects,
         job,
         &input.file,
@@ -299,46 +299,6 @@ fn start(
     }
 }
 
-/// A job the task graph can run, whose input splits into byte ranges and whose record knows its
-/// points and attributes: the prepare runs over the workers ([`super::prepare`]), and the start
-/// task reads only the input's first segment. `None`: the start task goes on with the input.
-fn start_by_ranges(
-    ctx: &Ctx,
-    rec: &JobRecord,
-    params: &ReconParams,
-    started_ms: u64,
-) -> Result<Option<Result<(), TaskError>>, TaskError> {
-    let input = &rec.view.input;
-    let (tiled::InputSplit::Bytes(range_bytes), Some(attrs)) = (ctx.split, input.attributes) else {
-        return Ok(None);
-    };
-    if input.bytes <= range_bytes {
-        return Ok(None);
-    }
-    let n = input.points as u64;
-    let spread = match plan_execution(n, params).map_err(recon_error)? {
-        Execution::OutOfCore(_) => false,
-        Execution::InMemory => {
-            if super::spread::spread_over(ctx, n, params, attrs)?.is_none() {
-                return Ok(None);
-            }
-            true
-        }
-    };
-    let Some((_, split)) = super::prepare::plan_split(ctx, rec, params, range_bytes)? else {
-        return Ok(None);
-    };
-    Ok(Some(super::prepare::start(
-        ctx,
-        rec,
-        params,
-        &split,
-        range_bytes,
-        spread,
-        started_ms,
-    )))
-}
-
 /// A spread job the task graph refused, run whole on this worker.
 fn whole_from_store(
     ctx: &Ctx,
@@ -347,7 +307,7 @@ fn whole_from_store(
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
     let input = &rec.view.input;
-    let data = ctx.block_on(super::prepare::get_input(
+    let data = ctx.block_on(objects::get_input(
         &ctx.res.objects,
         rec.view.id,
         &input.file,
@@ -423,7 +383,7 @@ fn volume(ctx: &Ctx, rec: &JobRecord, progress: &TaskProgress) -> Result<(), Tas
     use crate::job::volume::{VolumeRequest, run_volume};
     let job = rec.view.id;
     let input = &rec.view.input;
-    let bytes = ctx.block_on(super::prepare::get_input(
+    let bytes = ctx.block_on(objects::get_input(
         &ctx.res.objects,
         job,
         &input.file,
