@@ -79,7 +79,7 @@ fn store(ctx: &Ctx, job: Uuid) -> Store {
     }))
 }
 
-fn limits(rec: &JobRecord, params: &ReconParams) -> ReadLimits {
+pub(super) fn limits(rec: &JobRecord, params: &ReconParams) -> ReadLimits {
     ReadLimits {
         max_points: rec.max_points,
         max_bytes: rec.max_bytes,
@@ -87,7 +87,7 @@ fn limits(rec: &JobRecord, params: &ReconParams) -> ReadLimits {
     }
 }
 
-fn format_of(rec: &JobRecord) -> Result<PointFormat, TaskError> {
+pub(super) fn format_of(rec: &JobRecord) -> Result<PointFormat, TaskError> {
     PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
         TaskError::Job(crate::job::error::internal_body(
             "stored input has an unknown extension",
@@ -178,16 +178,7 @@ pub(super) fn start(
 ) -> Result<(), TaskError> {
     let job = rec.view.id;
     let n = rec.view.input.points as u64;
-    let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
-    if est.peak_mib > params.max_memory_mib as f64 {
-        let e = ReconError::OutOfCoreOverBudget {
-            points: n,
-            mib: est.peak_mib,
-            budget_mib: params.max_memory_mib,
-        };
-        return Err(recon_error(e));
-    }
-    params.validate().map_err(|e| recon_error(e.into()))?;
+    let est = super::steps::graph_estimate(ctx, n, params)?;
     tiled::prepare::check_supported(params).map_err(recon_error)?;
     let ranges = split.ranges().len();
     let state = PrepState {

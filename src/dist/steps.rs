@@ -11,7 +11,7 @@ use super::records::{self, DagState, JobRecord, dag_key, job_key};
 use super::spread::{record, timing};
 use super::{DistError, connect::Resources};
 use crate::error::{ErrorKind, ReconError};
-use crate::io::{MeshFormat, PointFormat, ReadLimits};
+use crate::io::{MeshFormat, ReadLimits};
 use crate::job::{ErrorBody, JobStatus, unix_now, unix_now_ms};
 use crate::params::ReconParams;
 use crate::pipeline::tiled::codec::{decode_region, encode_region};
@@ -245,17 +245,8 @@ fn start(
         &input.file,
         input.bytes,
     ))?;
-    let format =
-        PointFormat::from_path(std::path::Path::new(&rec.view.input.file)).ok_or_else(|| {
-            TaskError::Job(crate::job::error::internal_body(
-                "stored input has an unknown extension",
-            ))
-        })?;
-    let limits = ReadLimits {
-        max_points: rec.max_points,
-        max_bytes: rec.max_bytes,
-        max_memory_mib: params.max_memory_mib,
-    };
+    let format = super::prepare::format_of(rec)?;
+    let limits = super::prepare::limits(rec, params);
     let cloud = crate::io::parse_point_cloud(&data, format, &limits)
         .map_err(|e| run_error(RunError::Read(e)))?;
     let n = cloud.points.len() as u64;
@@ -313,16 +304,8 @@ fn whole_from_store(
         &input.file,
         input.bytes,
     ))?;
-    let format = PointFormat::from_path(std::path::Path::new(&input.file)).ok_or_else(|| {
-        TaskError::Job(crate::job::error::internal_body(
-            "stored input has an unknown extension",
-        ))
-    })?;
-    let limits = ReadLimits {
-        max_points: rec.max_points,
-        max_bytes: rec.max_bytes,
-        max_memory_mib: params.max_memory_mib,
-    };
+    let format = super::prepare::format_of(rec)?;
+    let limits = super::prepare::limits(rec, params);
     let source = PointSource::Bytes {
         data: &data,
         format,
@@ -425,16 +408,7 @@ fn prepare_graph(
     progress: &TaskProgress,
 ) -> Result<(), TaskError> {
     let t = Instant::now();
-    let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
-    if est.peak_mib > params.max_memory_mib as f64 {
-        let e = ReconError::OutOfCoreOverBudget {
-            points: n,
-            mib: est.peak_mib,
-            budget_mib: params.max_memory_mib,
-        };
-        return Err(recon_error(e));
-    }
-    params.validate().map_err(|e| recon_error(e.into()))?;
+    let est = graph_estimate(ctx, n, params)?;
     let options = TiledOptions {
         worker: ctx.worker.clone(),
         split: ctx.split,
@@ -482,6 +456,26 @@ fn prepare_graph(
         .collect();
     ctx.block_on(queue::publish(&ctx.res.js, &tasks))?;
     Ok(())
+}
+
+/// The task graph's estimate for a job of `n` points, refused when over its budget or when its
+/// parameters are invalid.
+pub(super) fn graph_estimate(
+    ctx: &Ctx,
+    n: u64,
+    params: &ReconParams,
+) -> Result<tiled::OutOfCoreEstimate, TaskError> {
+    let est = tiled::estimate(n, params.max_memory_mib, ctx.concurrency);
+    if est.peak_mib > params.max_memory_mib as f64 {
+        let e = ReconError::OutOfCoreOverBudget {
+            points: n,
+            mib: est.peak_mib,
+            budget_mib: params.max_memory_mib,
+        };
+        return Err(recon_error(e));
+    }
+    params.validate().map_err(|e| recon_error(e.into()))?;
+    Ok(est)
 }
 
 pub(super) fn set_stage(r: &mut JobRecord, stage: Stage, fraction: f64) {

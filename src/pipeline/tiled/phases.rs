@@ -190,6 +190,15 @@ pub(crate) fn plan_partition(
     put_json(store, "prep/routing", &rec)
 }
 
+impl RoutingRecord {
+    /// The block cores.
+    fn boxes(&self) -> Vec<Aabb> {
+        (self.cores.iter())
+            .map(|&[min, max]| Aabb { min, max })
+            .collect()
+    }
+}
+
 fn spill_key(generation: u32, b: usize, r: usize) -> String {
     format!("prep/spill/{generation}/{b}/{r}")
 }
@@ -199,11 +208,7 @@ fn spill_key(generation: u32, b: usize, r: usize) -> String {
 pub(crate) fn route(input: &RangeInput<'_>, store: &Store, dir: &Path) -> Result<u32, ReconError> {
     let (_, first_ids) = numbering(&get_json(store, "prep/counts")?)?;
     let rec: RoutingRecord = get_json(store, "prep/routing")?;
-    let cores: Vec<Aabb> = rec
-        .cores
-        .iter()
-        .map(|&[min, max]| Aabb { min, max })
-        .collect();
+    let cores = rec.boxes();
     let normalization = Normalization {
         offset: rec.offset,
         scale: rec.scale,
@@ -378,11 +383,7 @@ struct BlockRecord {
 pub(crate) fn clean_up(store: &Store, k: usize, dir: &Path) -> Result<Vec<String>, ReconError> {
     let clean: CleanRecord = get_json(store, "prep/clean")?;
     let rec: RoutingRecord = get_json(store, "prep/routing")?;
-    let cores: Vec<Aabb> = rec
-        .cores
-        .iter()
-        .map(|&[min, max]| Aabb { min, max })
-        .collect();
+    let cores = rec.boxes();
     let prov = clean.alive[k];
     for &r in &clean.ranges[k] {
         write_part(store, dir, clean.generation, prov, r)?;
