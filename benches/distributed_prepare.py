@@ -3,15 +3,16 @@
 and read whole in the `start` task (`--range-mib 0`), on the same input, one after the other.
 
     python3 benches/distributed_prepare.py [--points 4000000] [--workers 3] [--range-mib 16]
-        [--bin target/release/rbfsurf] [--full]
+        [--bin target/release/rbfsurf] [--full REPORT.json]
 
 Starts its own `nats-server -js` on a free loopback port with a temporary store, one API node
 (`serve --nats`) and K workers (`--concurrency 1`), generates a torus with normals (binary PLY),
 submits it with default parameters and a memory budget that sends it to the task graph, and
 reads the workers' logs: every task's worker, start and seconds. Prepare is measured from the
-`start` task's beginning to the first `block` task's; then the job is cancelled (unless `--full`,
-which waits for the mesh and prints the report's critical path). Prints, per run, the prepare
-time, the longest prepare task and the busy seconds per worker.
+`start` task's beginning to the first `block` task's; then the job is cancelled. With `--full
+REPORT.json` only the range run is made, the job runs to its end and its report (with `tasks[]`
+and `critical_path`) is saved there, for `benches/distributed_projection.py`. Prints, per run,
+the prepare time, the longest prepare task and the busy seconds per worker.
 """
 
 import argparse
@@ -99,7 +100,12 @@ def run(args, tmp, range_mib):
             wait_for("the block phase", lambda: f"job={jid} task=block" in text(), 3600)
             urllib.request.urlopen(urllib.request.Request(f"{base}/v1/reconstructions/{jid}", method="DELETE"))
             time.sleep(2.0)
-        view = json.load(urllib.request.urlopen(f"{base}/v1/reconstructions/{jid}")) if args.full else None
+        view = None
+        if args.full:
+            view = json.load(urllib.request.urlopen(f"{base}/v1/reconstructions/{jid}"))
+            rep = urllib.request.urlopen(f"{base}/v1/reconstructions/{jid}/report").read()
+            with open(args.full, "wb") as f:
+                f.write(rep)
         per_worker = {}
         start = first_block = None
         longest = ("", 0.0)
@@ -144,7 +150,7 @@ def main():
     ap.add_argument("--range-mib", type=float, default=16)
     ap.add_argument("--budget-mib", type=int, default=2048)
     ap.add_argument("--bin", default="target/release/rbfsurf")
-    ap.add_argument("--full", action="store_true")
+    ap.add_argument("--full", metavar="REPORT.json")
     args = ap.parse_args()
     if not shutil.which("nats-server"):
         sys.exit("nats-server is not installed (apt-get install nats-server)")
@@ -153,7 +159,7 @@ def main():
     subprocess.run([args.bin, "generate", "torus", "--points", str(args.points), "-o", args.cloud],
                    check=True, stdout=subprocess.DEVNULL)
     try:
-        for mib in (args.range_mib, 0):
+        for mib in (args.range_mib,) if args.full else (args.range_mib, 0):
             run(args, tmp, mib)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
