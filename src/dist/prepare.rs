@@ -242,12 +242,13 @@ pub(super) fn run(
         return Ok(()); // a stale redelivery: its phase is over
     }
     let outcome = if state.done[k] {
-        Ok(state)
+        Ok(Some(state))
     } else {
         run_item(ctx, rec, params, &state, phase, k, progress)
     };
     let state = match outcome {
-        Ok(s) => s,
+        Ok(Some(s)) => s,
+        Ok(None) => return Ok(()), // the job ended meanwhile
         Err(e) => return refuse(ctx, rec, &state_or(ctx, job)?, e),
     };
     if state.done.iter().all(|&d| d)
@@ -281,7 +282,8 @@ fn refuse(ctx: &Ctx, rec: &JobRecord, state: &PrepState, e: TaskError) -> Result
     publish(ctx, job, std::iter::once(TaskKind::Whole))
 }
 
-/// Runs item `k` of `phase` and marks it done; returns the state after the mark.
+/// Runs item `k` of `phase` and marks it done; returns the state after the mark (`None`: the
+/// job ended while it ran, and what it wrote is removed).
 fn run_item(
     ctx: &Ctx,
     rec: &JobRecord,
@@ -290,7 +292,7 @@ fn run_item(
     phase: Phase,
     k: usize,
     progress: &TaskProgress,
-) -> Result<PrepState, TaskError> {
+) -> Result<Option<PrepState>, TaskError> {
     let job = rec.view.id;
     let started_ms = unix_now_ms();
     let st = store(ctx, job);
@@ -301,9 +303,10 @@ fn run_item(
         Phase::Route => format!("route range {k}"),
         Phase::CleanUp => format!("clean-up {k}"),
     };
-    if phase == Phase::CleanUp {
-        let spills = phases::clean_up(&st, k, dir.path()).map_err(recon_error)?;
+    let written = if phase == Phase::CleanUp {
+        let (spills, written) = phases::clean_up(&st, k, dir.path()).map_err(recon_error)?;
         ctx.block_on(objects::remove(&ctx.res, job, &spills))?;
+        written
     } else {
         let (header, split) = plan_split(ctx, rec, params, state.range_bytes)?
             .ok_or_else(|| TaskError::Retry("the input no longer splits".into()))?;
@@ -334,9 +337,14 @@ fn run_item(
         match phase {
             Phase::Survey => phases::count(&ri, &st),
             Phase::Sample => phases::sample(&ri, &st),
-            _ => phases::route(&ri, &st, dir.path()).map(|_| ()),
+            _ => phases::route(&ri, &st, dir.path()),
         }
-        .map_err(recon_error)?;
+        .map_err(recon_error)?
+    };
+    if super::outcome::ended(ctx, job)? {
+        // Ended while this task ran: the end's removal may have passed these values already.
+        super::outcome::discard(ctx, job, &written)?;
+        return Ok(None);
     }
     if progress.cancel.load(std::sync::atomic::Ordering::Relaxed) {
         return Err(recon_error(ReconError::Cancelled));
@@ -364,7 +372,7 @@ fn run_item(
     ctx.update_job(job, |r| {
         set_stage(r, stage, done as f64 / s.done.len() as f64)
     })?;
-    Ok(s)
+    Ok(Some(s))
 }
 
 /// Moves `state`'s phase to `next` with `items` tasks (once: nothing when another task did),

@@ -325,3 +325,57 @@ fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
     let _ = whole.wait();
     eprintln!("cancelled {graph_s:.2} s (graph) and {whole_s:.2} s (whole job) after the DELETE");
 }
+
+/// A job cancelled while the workers prepare it by byte ranges: it ends cancelled and leaves
+/// only its input (one segment), whichever prepare or block tasks were running.
+#[test]
+fn a_delete_during_a_prepare_by_ranges_leaves_only_the_input() {
+    let Some((tmp, nats)) = private_nats() else {
+        return;
+    };
+    let dir = tmp.path();
+    let ranges = ["--range-mib", "0.125"];
+    let w1 = worker_with(&nats, dir, "w1", 1, &ranges);
+    let w2 = worker_with(&nats, dir, "w2", 1, &ranges);
+    let (_api, a) = serve(&nats, dir, "api");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let js = rt.block_on(jetstream(&nats));
+    let torus = torus_cloud(dir);
+    let logs = || w1.log() + &w2.log();
+    let mut job = Command::new(BIN)
+        .arg("submit")
+        .arg(&torus)
+        .args([
+            "--server",
+            &a,
+            "--max-memory-mib",
+            "110",
+            "--resolution",
+            "64",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_until(120, "the route tasks", || {
+        logs().contains("task=route range")
+    });
+    let id = job_ids(&a).pop().unwrap();
+    cancel_within(&a, &id, 10);
+    wait_until(10, "both workers to be idle", || {
+        open_tasks(&w1.log()) == 0 && open_tasks(&w2.log()) == 0
+    });
+    let t = Instant::now();
+    loop {
+        let left = rt.block_on(objects_of(&js, &id));
+        if left == vec![format!("{id}/input.ply/0")] {
+            break;
+        }
+        assert!(t.elapsed().as_secs() < 10, "objects left: {left:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let kv = rt.block_on(js.get_key_value("rbfsurf-jobs")).unwrap();
+    let prep = rt.block_on(kv.get(format!("prep.{id}"))).unwrap();
+    assert!(prep.is_none(), "the prepare state is removed");
+    let _ = job.wait();
+}

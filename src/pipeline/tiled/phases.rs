@@ -92,8 +92,8 @@ fn to_count(c: &CountRecord) -> RangeCount {
     }
 }
 
-/// Survey task: counts range `input.r` into `prep/count/<r>`.
-pub(crate) fn count(input: &RangeInput<'_>, store: &Store) -> Result<(), ReconError> {
+/// Survey task: counts range `input.r` into `prep/count/<r>`. Returns the keys written.
+pub(crate) fn count(input: &RangeInput<'_>, store: &Store) -> Result<Vec<String>, ReconError> {
     let c = count_range(&input.pass(), input.split.has_normals())?;
     let rec = CountRecord {
         total: c.total,
@@ -101,7 +101,9 @@ pub(crate) fn count(input: &RangeInput<'_>, store: &Store) -> Result<(), ReconEr
         invalid_normals: c.invalid_normals,
         bbox: (c.finite > 0).then_some([c.bbox.min, c.bbox.max]),
     };
-    put_json(store, &format!("prep/count/{}", input.r), &rec)
+    let key = format!("prep/count/{}", input.r);
+    put_json(store, &key, &rec)?;
+    Ok(vec![key])
 }
 
 /// After the survey tasks: checks the total as the whole-file reader would (`limits`), numbers
@@ -132,8 +134,9 @@ fn numbering(counts: &Counts) -> Result<(Survey, Vec<u32>), ReconError> {
     number(&c, SAMPLE_POINTS, counts.normals)
 }
 
-/// Sample task: the subsample's points of range `input.r` into `prep/sample/<r>`.
-pub(crate) fn sample(input: &RangeInput<'_>, store: &Store) -> Result<(), ReconError> {
+/// Sample task: the subsample's points of range `input.r` into `prep/sample/<r>`. Returns the
+/// keys written.
+pub(crate) fn sample(input: &RangeInput<'_>, store: &Store) -> Result<Vec<String>, ReconError> {
     let (s, first_ids) = numbering(&get_json(store, "prep/counts")?)?;
     let (ids, points, normals) = sample_range(&input.pass(), first_ids[input.r], s.step)?;
     let set = PointSet {
@@ -141,7 +144,9 @@ pub(crate) fn sample(input: &RangeInput<'_>, store: &Store) -> Result<(), ReconE
         points,
         normals: Some(normals),
     };
-    Ok(store.put(&format!("prep/sample/{}", input.r), set.encode())?)
+    let key = format!("prep/sample/{}", input.r);
+    store.put(&key, set.encode())?;
+    Ok(vec![key])
 }
 
 /// The whole survey, subsample included, from the stored counts and samples.
@@ -204,8 +209,12 @@ fn spill_key(generation: u32, b: usize, r: usize) -> String {
 }
 
 /// Route task: the points of range `input.r` to every block's part `r` of the partition's
-/// current generation; `dir` is a scratch folder. Returns the generation routed.
-pub(crate) fn route(input: &RangeInput<'_>, store: &Store, dir: &Path) -> Result<u32, ReconError> {
+/// current generation; `dir` is a scratch folder. Returns the keys written.
+pub(crate) fn route(
+    input: &RangeInput<'_>,
+    store: &Store,
+    dir: &Path,
+) -> Result<Vec<String>, ReconError> {
     let (_, first_ids) = numbering(&get_json(store, "prep/counts")?)?;
     let rec: RoutingRecord = get_json(store, "prep/routing")?;
     let cores = rec.boxes();
@@ -222,6 +231,7 @@ pub(crate) fn route(input: &RangeInput<'_>, store: &Store, dir: &Path) -> Result
         route::SPILL_BUFFER_BYTES,
         &input.pass(),
     )?;
+    let mut written = Vec::new();
     for b in (0..cores.len()).filter(|&b| routed.spilled[b] > 0) {
         let path = route::spill_path(dir, b, r);
         let bytes = std::fs::read(&path).map_err(|source| {
@@ -230,12 +240,15 @@ pub(crate) fn route(input: &RangeInput<'_>, store: &Store, dir: &Path) -> Result
                 source,
             })
         })?;
-        store.put(&spill_key(rec.generation, b, r), bytes)?;
+        let key = spill_key(rec.generation, b, r);
+        store.put(&key, bytes)?;
+        written.push(key);
         let _ = std::fs::remove_file(&path);
     }
     let key = format!("prep/routed/{}/{r}", rec.generation);
     put_json(store, &key, &(routed.core_points, routed.spilled))?;
-    Ok(rec.generation)
+    written.push(key);
+    Ok(written)
 }
 
 /// The spill keys of generation `generation` that its route tasks stored (those whose counts
@@ -379,8 +392,13 @@ struct BlockRecord {
 }
 
 /// Clean-up task: block `k`'s point set (`points/<k>`) from its spill parts (fetched into
-/// `dir`), and its box and drops in `prep/block/<k>`. Returns the spill keys it consumed.
-pub(crate) fn clean_up(store: &Store, k: usize, dir: &Path) -> Result<Vec<String>, ReconError> {
+/// `dir`), and its box and drops in `prep/block/<k>`. Returns the spill keys it consumed and the
+/// keys it wrote.
+pub(crate) fn clean_up(
+    store: &Store,
+    k: usize,
+    dir: &Path,
+) -> Result<(Vec<String>, Vec<String>), ReconError> {
     let clean: CleanRecord = get_json(store, "prep/clean")?;
     let rec: RoutingRecord = get_json(store, "prep/routing")?;
     let cores = rec.boxes();
@@ -402,10 +420,12 @@ pub(crate) fn clean_up(store: &Store, k: usize, dir: &Path) -> Result<Vec<String
         merged: d.merged,
         strays: d.strays,
     };
-    put_json(store, &format!("prep/block/{k}"), &rec)?;
-    Ok((clean.ranges[k].iter())
+    let key = format!("prep/block/{k}");
+    put_json(store, &key, &rec)?;
+    let consumed = (clean.ranges[k].iter())
         .map(|&r| spill_key(clean.generation, prov, r))
-        .collect())
+        .collect();
+    Ok((consumed, vec![super::tasks::block_key(k), key]))
 }
 
 /// After the clean-up tasks: the plan with its blocks.
