@@ -236,6 +236,23 @@ async fn objects_of(js: &async_nats::jetstream::Context, id: &str) -> Vec<String
     names
 }
 
+/// Waits (at most 10 s) until job `id`'s only object is its input's one segment.
+fn only_the_input_left(
+    rt: &tokio::runtime::Runtime,
+    js: &async_nats::jetstream::Context,
+    id: &str,
+) {
+    let t = Instant::now();
+    loop {
+        let left = rt.block_on(objects_of(js, id));
+        if left == vec![format!("{id}/input.ply/0")] {
+            return;
+        }
+        assert!(t.elapsed().as_secs() < 10, "objects left: {left:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 /// Lines of a log that start, or end (finished or failed), a task.
 fn open_tasks(log: &str) -> i64 {
     let started = log.matches("task started").count() as i64;
@@ -291,15 +308,7 @@ fn a_delete_stops_running_jobs_within_seconds_and_leaves_workers_idle() {
     wait_until(5, "both workers to be idle", || {
         open_tasks(&w1.log()) == 0 && open_tasks(&w2.log()) == 0
     });
-    let t = Instant::now();
-    loop {
-        let left = rt.block_on(objects_of(&js, &id));
-        if left == vec![format!("{id}/input.ply/0")] {
-            break;
-        }
-        assert!(t.elapsed().as_secs() < 10, "objects left: {left:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    only_the_input_left(&rt, &js, &id);
     let _ = graph.wait();
 
     // A whole job, cancelled mid-task. The test profile is optimised: at resolution 64 the job
@@ -365,15 +374,7 @@ fn a_delete_during_a_prepare_by_ranges_leaves_only_the_input() {
     wait_until(10, "both workers to be idle", || {
         open_tasks(&w1.log()) == 0 && open_tasks(&w2.log()) == 0
     });
-    let t = Instant::now();
-    loop {
-        let left = rt.block_on(objects_of(&js, &id));
-        if left == vec![format!("{id}/input.ply/0")] {
-            break;
-        }
-        assert!(t.elapsed().as_secs() < 10, "objects left: {left:?}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    only_the_input_left(&rt, &js, &id);
     let kv = rt.block_on(js.get_key_value("rbfsurf-jobs")).unwrap();
     let prep = rt.block_on(kv.get(format!("prep.{id}"))).unwrap();
     assert!(prep.is_none(), "the prepare state is removed");

@@ -97,17 +97,7 @@ pub(crate) fn number(
     max_sample: usize,
     normals: bool,
 ) -> Result<(Survey, Vec<u32>), ReconError> {
-    let mut s = Survey {
-        total: 0,
-        finite: 0,
-        has_normals: false,
-        invalid_normals: 0,
-        bbox: Aabb::empty(),
-        step: 1,
-        ids: Vec::new(),
-        points: Vec::new(),
-        normals: Vec::new(),
-    };
+    let mut s = Survey::empty();
     let mut first_ids = Vec::with_capacity(counts.len());
     let (mut total, mut finite) = (0u64, 0u64);
     for c in counts {

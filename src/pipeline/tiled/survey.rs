@@ -82,6 +82,21 @@ pub(crate) struct Survey {
 }
 
 impl Survey {
+    /// Nothing surveyed yet.
+    pub(crate) fn empty() -> Survey {
+        Survey {
+            total: 0,
+            finite: 0,
+            has_normals: false,
+            invalid_normals: 0,
+            bbox: Aabb::empty(),
+            step: 1,
+            ids: Vec::new(),
+            points: Vec::new(),
+            normals: Vec::new(),
+        }
+    }
+
     /// Keeps only the ids that are multiples of twice the current step.
     fn thin(&mut self) {
         self.step *= 2;
@@ -110,17 +125,7 @@ pub(crate) fn finite(p: &Point3) -> bool {
 
 /// The first pass: see the module doc. `max_sample` bounds the subsample.
 pub(crate) fn survey(input: &TiledInput<'_>, max_sample: usize) -> Result<Survey, ReconError> {
-    let mut s = Survey {
-        total: 0,
-        finite: 0,
-        has_normals: false,
-        invalid_normals: 0,
-        bbox: Aabb::empty(),
-        step: 1,
-        ids: Vec::new(),
-        points: Vec::new(),
-        normals: Vec::new(),
-    };
+    let mut s = Survey::empty();
     let mut input_normals = false;
     input.for_each_chunk(&mut |points, normals| {
         input_normals |= normals.is_some();
