@@ -39,6 +39,13 @@ pub struct Report {
     pub critical_path: Option<CriticalPath>,
 }
 
+/// Unix time in milliseconds (the clock of [`TaskReport::start_ms`] and `end_ms`).
+pub fn unix_now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
 /// One task of a distributed task-graph run (report `tasks[]`).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct TaskReport {

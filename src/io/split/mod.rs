@@ -71,6 +71,7 @@ impl<T: BufRead + Seek> Source for T {}
 #[derive(Clone, Copy)]
 enum Origin<'a> {
     Input(StreamInput<'a>),
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     Window(Window<'a>),
 }
 
@@ -124,6 +125,7 @@ pub(crate) fn split_input(
 /// [`split_input`] for an input of which only the window `w` is held: the header must lie in
 /// it (a window that begins the input and holds its first megabytes). The input's size was
 /// checked against the limits when it was stored.
+#[cfg_attr(not(feature = "nats"), allow(dead_code))]
 pub(crate) fn split_window(
     w: Window<'_>,
     limits: &ReadLimits,
@@ -255,6 +257,7 @@ impl Split {
 
     /// [`Split::read_range`] from a window of the input that holds the range (and, for text,
     /// the byte before it and the end of its last line: see [`Split::window_bounds`]).
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     pub(crate) fn read_window<E: From<IoError>>(
         &self,
         w: Window<'_>,
@@ -267,6 +270,7 @@ impl Split {
 
     /// The bytes a window must hold to read range `r`: the range, and for text the byte before
     /// it (whether a line begins at its start) and `slack` bytes after it (its last line).
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     pub(crate) fn window_bounds(&self, r: usize, slack: u64) -> ByteRange {
         let range = self.ranges[r];
         match self.layout {

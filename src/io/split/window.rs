@@ -18,6 +18,7 @@ pub(crate) struct Window<'a> {
     /// The whole input's length, bytes.
     pub len: u64,
     /// The input's format.
+    #[cfg_attr(not(feature = "nats"), allow(dead_code))]
     pub format: PointFormat,
 }
 

@@ -33,6 +33,7 @@ pub(crate) mod codec;
 pub(crate) mod graph;
 mod merge;
 mod patches;
+#[cfg(feature = "nats")]
 pub(crate) mod phases;
 pub(crate) mod prepare;
 mod ranges;

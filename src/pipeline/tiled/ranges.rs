@@ -206,9 +206,9 @@ impl<'a> Scan<'a> {
 
     /// Runs `f` as task `name`, recording its wall-clock interval.
     pub(crate) fn timed<T>(&self, name: String, f: impl FnOnce() -> T) -> T {
-        let start_ms = crate::job::unix_now_ms();
+        let start_ms = crate::report::unix_now_ms();
         let out = f();
-        let end_ms = crate::job::unix_now_ms().max(start_ms);
+        let end_ms = crate::report::unix_now_ms().max(start_ms);
         let t = TaskReport {
             task: name,
             worker: self.worker.clone(),
