@@ -1,6 +1,8 @@
 //! Fringes of open scans: pieces of a trimmed surface with no interior, every vertex within
 //! [`FRINGE_DEPTH`] support radii of the piece's own border (measured along its edges), that lie
-//! beside a piece that stays (within [`FRINGE_REACH`] support radii of it).
+//! beside a piece that stays (within [`FRINGE_REACH`] support radii of it) and hold no data of
+//! their own (no point they carry farther than [`OWN_DATA_GAP`] support radii from every point
+//! the staying pieces carry).
 //!
 //! A single-view range scan leaves such strips where the view grazes the object or jumps in
 //! depth: mixed pixels at silhouettes, the few samples of a surface seen edge-on behind an
@@ -9,9 +11,18 @@
 //! inside its border is a scanned surface and stays, however small; so does a shallow piece
 //! farther than 4R from every piece that stays (a small separate object: the clusters of the
 //! shared `poste_france` scan keep their six pieces, 8R took one of them); the largest piece
-//! always stays. Measured on the ten Stanford bunny range views (`x y z`, defaults): 34 pieces
-//! → 22, seven of ten views in at most two pieces (bun000: 4 → 2). `O(E log V)` (Dijkstra from
-//! the border vertices) plus a k-d tree over the kept vertices.
+//! always stays. A shallow piece nearer than that stays too when the data under it are a piece
+//! of their own: every point it carries lies more than [`OWN_DATA_GAP`] support radii from the
+//! points the staying pieces carry (a narrow strip of surface seen across a depth jump), while a
+//! ribbon of the scan's own silhouette carries points next to the sheet's. Measured on the ten
+//! Stanford bunny range views (`x y z`, defaults, checked with `benches/range_pieces.py`): strips
+//! that are scan pieces of their own lie 3.7–4.8 R from the sheet's data (33, 462 and 102
+//! points), strips on the sheet's own piece 3.2–3.5 R; at 3 R the shared `hippo2` scan went from
+//! 3 to 5 pieces and `b9_training` from 3 to 5 (strips 3.6–3.8 R from their data), at 4.5 R the
+//! 102-point piece of `top3` is kept and every other result is as without the rule.
+//! `O(E log V)`
+//! (Dijkstra from the border vertices) plus k-d trees over the kept vertices, the mesh's vertices
+//! and the kept pieces' points.
 
 use crate::geometry::{Point3, TriMesh, dist2};
 use std::cmp::Reverse;
@@ -25,9 +36,17 @@ pub const FRINGE_DEPTH: f64 = 3.0;
 /// piece that stays; a shallow piece on its own (a small separate object of a scene) stays.
 pub const FRINGE_REACH: f64 = 4.0;
 
-/// Per triangle, whether it belongs to a fringe of `mesh` (support radius `radius`, mesh units),
-/// and the number of fringe pieces. Closed pieces and the largest piece are never fringes.
-pub fn fringes(mesh: &TriMesh, radius: f64) -> (Vec<bool>, usize) {
+/// A shallow piece beside a staying one still stays when every point it carries (a point whose
+/// nearest mesh vertex is in it, within one support radius) lies farther than this many support
+/// radii from every point a staying piece carries, and it carries at least
+/// [`super::floaters::OWNED_MIN_POINTS`]: the data under it are cut from the rest by a gap (see
+/// the module doc for the measurements behind 4.5).
+pub const OWN_DATA_GAP: f64 = 4.5;
+
+/// Per triangle, whether it belongs to a fringe of `mesh` made from `points` (support radius
+/// `radius`, mesh units), and the number of fringe pieces. Closed pieces and the largest piece
+/// are never fringes.
+pub fn fringes(mesh: &TriMesh, points: &[Point3], radius: f64) -> (Vec<bool>, usize) {
     let (labels, sizes) = super::topology::triangle_components(mesh);
     let mut drop = vec![false; mesh.triangles.len()];
     if sizes.len() < 2 || radius.is_nan() || radius <= 0.0 {
@@ -46,7 +65,12 @@ pub fn fringes(mesh: &TriMesh, radius: f64) -> (Vec<bool>, usize) {
     let shallow: Vec<bool> = (0..sizes.len())
         .map(|c| c != largest && deepest[c] <= FRINGE_DEPTH * radius)
         .collect();
-    let fringe = beside_kept(mesh, &labels, &shallow, FRINGE_REACH * radius);
+    let mut fringe = beside_kept(mesh, &labels, &shallow, FRINGE_REACH * radius);
+    if fringe.iter().any(|&f| f) {
+        for c in own_data(mesh, &labels, &shallow, &fringe, points, radius) {
+            fringe[c] = false;
+        }
+    }
     for (d, &c) in drop.iter_mut().zip(&labels) {
         *d = fringe[c as usize];
     }
@@ -77,6 +101,65 @@ fn beside_kept(mesh: &TriMesh, labels: &[u32], shallow: &[bool], reach: f64) -> 
         near[c as usize] = knn.first().is_some_and(|&(_, d)| d <= reach);
     }
     near
+}
+
+/// The `candidates` (shallow pieces beside a staying one) that carry data of their own: at
+/// least [`super::floaters::OWNED_MIN_POINTS`] of `points` have their nearest mesh vertex in the
+/// piece within `radius`, and all of them lie farther than [`OWN_DATA_GAP`] `· radius` from
+/// every point whose nearest vertex (within `radius`) is in a piece that is not `shallow`.
+fn own_data(
+    mesh: &TriMesh,
+    labels: &[u32],
+    shallow: &[bool],
+    candidates: &[bool],
+    points: &[Point3],
+    radius: f64,
+) -> Vec<usize> {
+    use crate::spatial::{IndexKind, build_index};
+    use rayon::prelude::*;
+    let mut piece = vec![u32::MAX; mesh.vertices.len()];
+    for (t, &c) in mesh.triangles.iter().zip(labels) {
+        t.iter().for_each(|&v| piece[v as usize] = c);
+    }
+    let used: Vec<u32> = (0..mesh.vertices.len() as u32)
+        .filter(|&v| piece[v as usize] != u32::MAX)
+        .collect();
+    let positions: Vec<Point3> = used.iter().map(|&v| mesh.vertices[v as usize]).collect();
+    let Ok(vertices) = build_index(&positions, IndexKind::KdTree, 16) else {
+        return Vec::new();
+    };
+    // The piece carrying each point (u32::MAX: none within `radius`).
+    let carrier: Vec<u32> = (points.par_iter())
+        .map_init(Vec::new, |knn, p| {
+            vertices.nearest_k(p, 1, knn);
+            match knn.first() {
+                Some(&(i, d)) if d <= radius => piece[used[i as usize] as usize],
+                _ => u32::MAX,
+            }
+        })
+        .collect();
+    let kept: Vec<Point3> = (points.iter().zip(&carrier))
+        .filter(|&(_, &c)| c != u32::MAX && !shallow[c as usize])
+        .map(|(p, _)| *p)
+        .collect();
+    let Ok(kept) = build_index(&kept, IndexKind::KdTree, 16) else {
+        return Vec::new();
+    };
+    let gap = OWN_DATA_GAP * radius;
+    let mut carried = vec![0usize; candidates.len()];
+    let mut near = vec![false; candidates.len()];
+    let mut knn = Vec::new();
+    for (p, &c) in points.iter().zip(&carrier) {
+        if c == u32::MAX || !candidates[c as usize] || near[c as usize] {
+            continue;
+        }
+        carried[c as usize] += 1;
+        kept.nearest_k(p, 1, &mut knn);
+        near[c as usize] = knn.first().is_none_or(|&(_, d)| d <= gap);
+    }
+    (0..candidates.len())
+        .filter(|&c| candidates[c] && !near[c] && carried[c] >= super::floaters::OWNED_MIN_POINTS)
+        .collect()
 }
 
 /// Per vertex, the length of the shortest edge path to a border vertex (a vertex of an edge
@@ -180,7 +263,7 @@ mod tests {
         sheet(&mut mesh, 20, 20, h, 1.05, 0.5); // a patch 0.2 wide beside it: depth 0.1
         sheet(&mut mesh, 6, 6, h, 5.0, 0.0); // a small piece far from everything
         let radius = 0.015; // fringes: depth ≤ 0.045, within 0.06 of a piece that stays
-        let (drop, n) = fringes(&mesh, radius);
+        let (drop, n) = fringes(&mesh, &[], radius);
         assert_eq!(n, 1);
         let (labels, _) = crate::mesh::topology::triangle_components(&mesh);
         for (t, &d) in drop.iter().enumerate() {
@@ -188,7 +271,7 @@ mod tests {
         }
         // A radius so large that the patch has no interior either: it goes too (beside the
         // scan), the scan and the far piece stay.
-        let (drop, n) = fringes(&mesh, 0.04);
+        let (drop, n) = fringes(&mesh, &[], 0.04);
         assert_eq!(n, 2);
         assert!(drop[..20000].iter().all(|&d| !d));
         assert!(drop[drop.len() - 72..].iter().all(|&d| !d));
@@ -199,5 +282,42 @@ mod tests {
             "{}",
             depth[50 * 101 + 50]
         );
+    }
+
+    #[test]
+    fn a_strip_with_data_of_its_own_stays_and_a_ribbon_of_the_sheets_data_goes() {
+        let h = 0.01;
+        let mut mesh = TriMesh::default();
+        sheet(&mut mesh, 100, 100, h, 0.0, 0.0); // the scan: 1 × 1, its points at its vertices
+        let mut points: Vec<Point3> = mesh.vertices.clone();
+        // A ribbon 0.03 beside the sheet's right edge, carrying only points along its near edge
+        // (0.03 from the sheet's points: the sheet's own silhouette).
+        sheet(&mut mesh, 60, 6, h, 1.03, 0.2);
+        points.extend((0..=60).map(|i| [1.03 + i as f64 * h, 0.2, 0.0]));
+        // A strip 0.05 above the sheet's top edge with points on its far half (0.08 from the
+        // sheet's points, more than the gap of 4.5 × 0.015: a piece of surface of its own).
+        sheet(&mut mesh, 60, 6, h, 0.2, 1.05);
+        points.extend(
+            (0..=60)
+                .flat_map(|i| (3..=6).map(move |j| (i, j)))
+                .map(|(i, j)| [0.2 + i as f64 * h, 1.05 + j as f64 * h, 0.0]),
+        );
+        let radius = 0.015; // both shallow (depth 0.03 ≤ 0.045) and within 0.06 of the sheet
+        let (labels, _) = crate::mesh::topology::triangle_components(&mesh);
+        // Without the points both are fringes.
+        let (_, n) = fringes(&mesh, &[], radius);
+        assert_eq!(n, 2);
+        let (drop, n) = fringes(&mesh, &points, radius);
+        assert_eq!(n, 1);
+        for (t, &d) in drop.iter().enumerate() {
+            assert_eq!(d, labels[t] == labels[20000], "triangle {t}");
+        }
+        assert_ne!(labels[20000], labels[0]);
+        // Fewer than ten points of its own are not enough to keep the strip.
+        let few: Vec<Point3> = (points[..points.len() - 61 * 4].iter())
+            .copied()
+            .chain((0..9).map(|i| [0.2 + 6.0 * i as f64 * h, 1.1, 0.0]))
+            .collect();
+        assert_eq!(fringes(&mesh, &few, radius).1, 2);
     }
 }

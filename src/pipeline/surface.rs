@@ -146,7 +146,7 @@ pub(crate) fn extract_surface(
         s.peeled_triangles =
             crate::mesh::peel::peel_border(&mut mesh, &fit.points, reach, fit.support_radius);
         if params.min_support > 0.0 {
-            let (drop, n) = crate::mesh::fringes::fringes(&mesh, fit.support_radius);
+            let (drop, n) = crate::mesh::fringes::fringes(&mesh, &fit.points, fit.support_radius);
             s.fringes_removed = n;
             s.fringe_triangles = trim::remove_triangles(&mut mesh, &drop);
         }
