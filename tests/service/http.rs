@@ -487,7 +487,7 @@ async fn oversized_uploads_get_413_without_the_body_being_read() {
     let a = send(&s.app, req).await;
     assert_eq!(a.expect_error(StatusCode::PAYLOAD_TOO_LARGE), "too_large");
     assert!(!polled.load(Ordering::SeqCst), "body was read");
-    // Chunked (no length): reading stops right after the limit, not at the end of the stream.
+    // Chunked (no length): reading stops soon after the limit, not at the end of the stream.
     let sent = Arc::new(AtomicUsize::new(0));
     let c = sent.clone();
     let body = Body::from_stream(stream::poll_fn(move |_| {
@@ -500,8 +500,11 @@ async fn oversized_uploads_get_413_without_the_body_being_read() {
         .unwrap();
     let a = send(&s.app, req).await;
     assert_eq!(a.expect_error(StatusCode::PAYLOAD_TOO_LARGE), "too_large");
+    // After the answer the refused body is drained for a lingering close, at most twice the
+    // limit (the drain runs on its own task): the endless stream is never read to its end.
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     assert!(
-        sent.load(Ordering::SeqCst) <= (64 << 10) + 8192,
+        sent.load(Ordering::SeqCst) <= 2 * (64 << 10) + 8192,
         "read {} bytes",
         sent.load(Ordering::SeqCst)
     );
