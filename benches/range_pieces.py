@@ -57,7 +57,13 @@ def pieces(pts, grid, brk):
         edges.append((ea, eb, d))
     d_all = np.concatenate([e[2] for e in edges])
     med = float(np.median(d_all))
-    parent = np.arange(len(pts))
+    pairs = [(a, b) for ea, eb, d in edges for a, b in zip(ea[d <= brk * med], eb[d <= brk * med])]
+    return connected_labels(len(pts), pairs), med
+
+
+def connected_labels(n, pairs):
+    """Per item of `0..n`, a representative of its connected set under the `pairs`."""
+    parent = np.arange(n)
 
     def find(x):
         while parent[x] != x:
@@ -65,13 +71,11 @@ def pieces(pts, grid, brk):
             x = parent[x]
         return x
 
-    for ea, eb, d in edges:
-        for a, b in zip(ea[d <= brk * med], eb[d <= brk * med]):
-            ra, rb = find(a), find(b)
-            if ra != rb:
-                parent[ra] = rb
-    labels = np.array([find(i) for i in range(len(pts))])
-    return labels, med
+    for a, b in pairs:
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+    return np.array([find(i) for i in range(n)])
 
 
 def read_obj(path):
@@ -85,19 +89,7 @@ def read_obj(path):
 
 
 def components(v, f):
-    parent = np.arange(len(v))
-
-    def find(x):
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for a, b, c in f:
-        ra, rb, rc = find(a), find(b), find(c)
-        parent[rb] = ra
-        parent[find(rc)] = ra
-    return np.array([find(i) for i in range(len(v))])
+    return connected_labels(len(v), [(t[0], t[k]) for t in f for k in (1, 2)])
 
 
 def main():
