@@ -343,6 +343,7 @@ fn decode_body(r: &mut Reader<'_>) -> Result<FieldModel, String> {
             carrier_index,
             carrier_radius,
             finest_support,
+            unsupported_dropped: false,
         }),
         normalization: Normalization { offset, scale },
         points,

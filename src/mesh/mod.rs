@@ -19,6 +19,7 @@ pub(crate) mod incidence;
 pub(crate) mod lod;
 pub mod optimize;
 pub(crate) mod peel;
+pub(crate) mod reach;
 pub mod simplify;
 #[cfg(test)]
 pub(crate) mod test_meshes;

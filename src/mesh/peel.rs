@@ -20,6 +20,7 @@
 //! `max_distance` = `R/2`: mesh→scan mean distance 1.72e-3 → 9.5e-4 of the diagonal, same 12
 //! pieces and 51 loops.
 
+use super::reach::{Reach, centroid, centroid_reach};
 use crate::geometry::{Point3, TriMesh};
 use crate::spatial::{KdTree, SpatialIndex};
 use rayon::prelude::*;
@@ -39,30 +40,6 @@ const MANY: u32 = u32::MAX - 1;
 /// then cuts notches along the bridges.
 const OPPOSITE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
-/// Distance from each triangle's centroid to the nearest of `points` (the mesh's units);
-/// infinite for every triangle when there are no points.
-pub fn centroid_distances(mesh: &TriMesh, points: &[Point3]) -> Vec<f64> {
-    match KdTree::build(points) {
-        Ok(tree) => (nearest_to(mesh, &tree).into_iter())
-            .map(|hit| hit.map_or(f64::INFINITY, |(_, d)| d))
-            .collect(),
-        Err(_) => vec![f64::INFINITY; mesh.triangles.len()],
-    }
-}
-
-/// The centroid of triangle `t`.
-fn centroid(mesh: &TriMesh, t: &[u32; 3]) -> Point3 {
-    [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0)
-}
-
-/// Per triangle, the point of `tree` nearest its centroid and the distance (`None` when the tree
-/// is empty).
-fn nearest_to(mesh: &TriMesh, tree: &KdTree) -> Vec<Option<(u32, f64)>> {
-    (mesh.triangles.par_iter())
-        .map(|t| tree.nearest_one(&centroid(mesh, t)))
-        .collect()
-}
-
 /// Peels `mesh`'s border: removes, farthest first, the triangles whose centroid is farther than
 /// `max_distance` from every one of `points` and not between them ([`between_data`] within
 /// `radius`, the support radius), and whose removal is an elementary collapse (see the module
@@ -74,17 +51,22 @@ pub fn peel_border(mesh: &mut TriMesh, points: &[Point3], max_distance: f64, rad
     let Ok(tree) = KdTree::build(points) else {
         return 0;
     };
-    let nearest = nearest_to(mesh, &tree);
-    let dist: Vec<f64> = (nearest.iter())
-        .map(|hit| hit.map_or(f64::INFINITY, |(_, d)| d))
+    let reach = centroid_reach(mesh, (&tree, points), max_distance);
+    // Only the triangles beyond `max_distance` are peeled, farthest first: the others' distance
+    // is never read.
+    let dist: Vec<f64> = (reach.iter())
+        .map(|r| match r {
+            Reach::Within => 0.0,
+            Reach::Beyond(hit) => hit.map_or(f64::INFINITY, |(_, d)| d),
+        })
         .collect();
-    let overhang: Vec<bool> = (mesh.triangles.par_iter().zip(&nearest))
-        .map_init(Vec::new, |near, (t, hit)| match *hit {
-            None => true,
-            Some((i, d)) => {
+    let overhang: Vec<bool> = (mesh.triangles.par_iter().zip(&reach))
+        .map_init(Vec::new, |near, (t, r)| match *r {
+            Reach::Within => false,
+            Reach::Beyond(None) => true,
+            Reach::Beyond(Some((i, d))) => {
                 let c = centroid(mesh, t);
-                d > max_distance
-                    && !between_data(c, (points[i as usize], d), (&tree, points), radius, near)
+                !between_data(c, (points[i as usize], d), (&tree, points), radius, near)
             }
         })
         .collect();

@@ -3,6 +3,18 @@ use crate::mesh::test_meshes::sheet;
 use crate::mesh::topology::analyze;
 use crate::mesh::trim;
 
+/// Distance from each triangle's centroid to the nearest of `points`, by brute force.
+fn centroid_distances(mesh: &TriMesh, points: &[Point3]) -> Vec<f64> {
+    (mesh.triangles.iter())
+        .map(|t| {
+            let c = centroid(mesh, t);
+            (points.iter())
+                .map(|p| crate::geometry::dist2(*p, c).sqrt())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
 /// Points every 0.25 over the part of `[0, nx] × [0, ny]` where `inside` holds, in z = 0.
 fn samples(nx: u32, ny: u32, inside: impl Fn(f64, f64) -> bool) -> Vec<Point3> {
     let mut p = Vec::new();

@@ -2,7 +2,9 @@
 //! `max_distance` from every data point), so a single range image gives an open surface that stays
 //! on the data instead of a sheet continued by the carrier. `O(t log n)`, parallel.
 
+use super::reach::{Reach, centroid_reach};
 use crate::geometry::{Point3, TriMesh};
+use crate::spatial::KdTree;
 
 /// Per triangle: `true` when its centroid is farther than `max_distance` from all `points` (same units
 /// as the mesh), i.e. no data supports it.
@@ -10,8 +12,12 @@ pub fn unsupported_triangles(mesh: &TriMesh, points: &[Point3], max_distance: f6
     if points.is_empty() {
         return vec![false; mesh.triangles.len()];
     }
-    let dist = super::peel::centroid_distances(mesh, points);
-    dist.into_iter().map(|d| d > max_distance).collect()
+    let Ok(tree) = KdTree::build(points) else {
+        return vec![true; mesh.triangles.len()];
+    };
+    (centroid_reach(mesh, (&tree, points), max_distance).into_iter())
+        .map(|r| r != Reach::Within)
+        .collect()
 }
 
 /// Un-flags the pinholes of a trim: every edge-connected region of flagged triangles that shares an

@@ -135,6 +135,8 @@ pub fn fit_field(
         carrier_index: index,
         carrier_radius: support.radius,
         finest_support: support.radius,
+        // The floaters go when their share is positive (see `surface::extract_surface`).
+        unsupported_dropped: params.min_support > 0.0,
     });
     let t = Instant::now();
     let residual = super::residual_with_carrier(field.as_ref(), &points, &carrier_at, progress)?;

@@ -40,11 +40,13 @@
 
 use super::FittedField;
 use crate::error::ReconError;
-use crate::geometry::{Aabb, TriMesh, surround_cone};
+use crate::geometry::{Aabb, Point3, TriMesh, surround_cone};
 use crate::mesh::simplify;
 use crate::mesh::{area, floaters, handles, trim};
 use crate::params::{Boundary, ChordTolerance, ReconParams};
-use crate::polygonize::{DataBand, Everywhere, PolygonizeParams, Region, polygonize_in};
+use crate::polygonize::{
+    DataBand, Everywhere, PolygonizeParams, Region, ScalarField, polygonize_in,
+};
 use crate::progress::{Progress, Stage};
 use crate::rbf::CarrierKind;
 use crate::report::PolygonizeReport;
@@ -226,18 +228,58 @@ fn simplify_to_chord_error(
         s.simplify_error = stats.error;
     }
     let step = mesh.triangles.len().div_ceil(CHORD_SAMPLES).max(1);
-    let field = fit.field.as_ref();
-    let d: Vec<f64> = (mesh.triangles.par_iter().step_by(step))
+    let centroids: Vec<Point3> = (mesh.triangles.iter().step_by(step))
         .map(|t| {
-            let c = [0, 1, 2]
-                .map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0);
-            let g = crate::geometry::norm(field.gradient(&c));
-            let f = field.value(&c).abs();
-            if g > 0.0 { f / g } else { f }
+            [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0)
         })
         .collect();
+    let d = first_order_distances(fit.field.as_ref(), &centroids, CHORD_BUCKET * s.cell_size);
     s.chord_error_max = d.iter().fold(0.0, |a: f64, &b| a.max(b));
     s.chord_error_mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
+}
+
+/// Edge of the boxes the chord samples are evaluated in together, in grid cells (a few tiles: the
+/// field gathers its candidates once per box).
+const CHORD_BUCKET: f64 = 8.0;
+
+/// `|f| / |∇f|` (`|f|` where the gradient vanishes) at each of `points`, evaluated box by box:
+/// the points are bucketed into cubes of edge `edge` and each cube's are evaluated through one
+/// [`crate::polygonize::ScalarField::prepare`] (the values of per-point evaluation, gathered once
+/// per cube). Parallel over the cubes; the result is in the order of `points`.
+fn first_order_distances(field: &dyn ScalarField, points: &[Point3], edge: f64) -> Vec<f64> {
+    let edge = if edge.is_finite() && edge > 0.0 {
+        edge
+    } else {
+        1.0
+    };
+    let key = |p: &Point3| p.map(|v| (v / edge).floor() as i64);
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.sort_unstable_by_key(|&i| key(&points[i as usize]));
+    let buckets: Vec<&[u32]> = order
+        .chunk_by(|a, b| key(&points[*a as usize]) == key(&points[*b as usize]))
+        .collect();
+    let per_bucket: Vec<Vec<(u32, f64)>> = buckets
+        .par_iter()
+        .map(|ids| {
+            let pts: Vec<Point3> = ids.iter().map(|&i| points[i as usize]).collect();
+            let region = Aabb::from_points(&pts);
+            let mut prepared = field.prepare(&region);
+            let (mut f, mut g) = (vec![0.0; pts.len()], vec![[0.0; 3]; pts.len()]);
+            prepared.values(&pts, &mut f);
+            prepared.gradients(&pts, &mut g);
+            (ids.iter().zip(f.iter().zip(&g)))
+                .map(|(&i, (f, g))| {
+                    let (f, g) = (f.abs(), crate::geometry::norm(*g));
+                    (i, if g > 0.0 { f / g } else { f })
+                })
+                .collect()
+        })
+        .collect();
+    let mut out = vec![0.0; points.len()];
+    for (i, d) in per_bucket.into_iter().flatten() {
+        out[i as usize] = d;
+    }
+    out
 }
 
 /// Share of the surface area farther than the support radius from every data point, measured on

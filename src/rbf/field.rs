@@ -276,6 +276,12 @@ pub struct RbfField {
     pub carrier_radius: f64,
     /// Finest support radius of the spline, normalised units.
     pub finest_support: f64,
+    /// Whether the caller drops every piece of the zero set that no data point carries (the
+    /// floaters: [`crate::mesh::floaters`] with the finest support radius as the band, or wider):
+    /// the skip test then rules out every cell farther than the finest support radius from the
+    /// data without sampling the far field there, since a piece of the surface lying wholly in
+    /// such cells would be dropped, and one reaching nearer is followed into them.
+    pub unsupported_dropped: bool,
 }
 
 impl RbfField {
@@ -374,7 +380,8 @@ impl ScalarField for RbfField {
     /// answer can only lose a piece lying wholly in skipped cells, all farther than the finest
     /// support radius from the data (see [`crate::polygonize::polygonize_in`]).
     ///
-    /// Active when a data point's support reaches the cell; elsewhere the field is the carrier
+    /// Active when a data point's support reaches the cell; elsewhere inactive when
+    /// [`RbfField::unsupported_dropped`], else the field there is the carrier
     /// and the coarser levels, decided by a Lipschitz bound for a single-level global field with an
     /// analytic carrier, else by sign changes or a value below the cell's half diagonal at the 8
     /// corners and the centre (every point of the cell is within ~0.58 half diagonals of one of
@@ -414,6 +421,9 @@ impl RbfField {
             .is_some_and(|&(_, d)| d <= self.finest_support + half)
         {
             return true;
+        }
+        if self.unsupported_dropped {
+            return false;
         }
         if let (Correction::Global(s), Some(l)) = (&self.correction, self.carrier.lipschitz())
             && s.levels.len() <= 1

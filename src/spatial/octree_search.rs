@@ -163,9 +163,17 @@ impl Octree {
                     }
                 }
             } else {
+                // A child farther than the k-th best so far can hold no better point: it would
+                // only be popped to end the search.
+                let worst = match best.peek() {
+                    Some(w) if best.len() == k => w.0.0,
+                    _ => f64::INFINITY,
+                };
                 for c in node.children() {
                     let cd = self.nodes[c].bbox.dist2_to(q);
-                    frontier.push(Reverse((D2(cd), c as u32)));
+                    if cd <= worst {
+                        frontier.push(Reverse((D2(cd), c as u32)));
+                    }
                 }
             }
         }

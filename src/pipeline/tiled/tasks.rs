@@ -387,6 +387,9 @@ pub(crate) fn polygonize_region(
         carrier_index: index,
         carrier_radius: plan.support.radius,
         finest_support: plan.support.radius,
+        // Each region is polygonized alone and must meet its neighbours exactly at the border:
+        // the far field is searched as everywhere else.
+        unsupported_dropped: false,
     };
     let pp = PolygonizeParams {
         resolution: plan.grid.resolution,
