@@ -8,11 +8,11 @@
 //! classification never disagrees with a direct test (results equal brute force exactly).
 //! Cost about `O(depth + hits)` for compact queries.
 //!
-//! k-NN is best-first: nodes are popped from a min-heap keyed by box distance, candidates are
-//! kept in a max-heap of size `k`; the search stops when the nearest unvisited box is farther
-//! than the current `k`-th candidate.
+//! k-NN is depth-first, nearest box first: candidates are kept in a max-heap of size `k`, and a
+//! node's remaining children are skipped once the nearest of them lies beyond the current `k`-th
+//! candidate (the exact `k` nearest, ties by index, as brute force).
 
-use std::cmp::{Ordering, Reverse};
+use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use crate::geometry::{Point3, dist2};
@@ -145,43 +145,50 @@ impl Octree {
             return;
         }
         let mut best: BinaryHeap<(D2, u32)> = BinaryHeap::with_capacity(k + 1);
-        let mut frontier = BinaryHeap::new();
-        frontier.push(Reverse((D2(self.nodes[0].bbox.dist2_to(q)), 0u32)));
-        while let Some(Reverse((D2(d2), ni))) = frontier.pop() {
-            if best.len() == k && best.peek().is_some_and(|w| d2 > w.0.0) {
-                break;
-            }
-            let node = &self.nodes[ni as usize];
-            if node.is_leaf() {
-                for pos in node.range() {
-                    let cand = (D2(dist2(self.pts[pos], *q)), self.idx[pos]);
-                    if best.len() < k {
-                        best.push(cand);
-                    } else if best.peek().is_some_and(|w| cand < *w) {
-                        best.pop();
-                        best.push(cand);
-                    }
-                }
-            } else {
-                // A child farther than the k-th best so far can hold no better point: it would
-                // only be popped to end the search.
-                let worst = match best.peek() {
-                    Some(w) if best.len() == k => w.0.0,
-                    _ => f64::INFINITY,
-                };
-                for c in node.children() {
-                    let cd = self.nodes[c].bbox.dist2_to(q);
-                    if cd <= worst {
-                        frontier.push(Reverse((D2(cd), c as u32)));
-                    }
-                }
-            }
-        }
+        self.nearest_in(0, q, k, &mut best);
         out.extend(
             best.into_sorted_vec()
                 .into_iter()
                 .map(|(d, i)| (i, d.0.sqrt())),
         );
+    }
+
+    /// The k-NN search below node `ni`: a leaf's points enter `best` (the `k` smallest
+    /// `(squared distance, index)` so far); an inner node's children are visited nearest box
+    /// first, and the rest skipped once a box lies beyond the `k`-th candidate.
+    fn nearest_in(&self, ni: usize, q: &Point3, k: usize, best: &mut BinaryHeap<(D2, u32)>) {
+        let node = &self.nodes[ni];
+        if node.is_leaf() {
+            for pos in node.range() {
+                let cand = (D2(dist2(self.pts[pos], *q)), self.idx[pos]);
+                if best.len() < k {
+                    best.push(cand);
+                } else if best.peek().is_some_and(|w| cand < *w) {
+                    best.pop();
+                    best.push(cand);
+                }
+            }
+            return;
+        }
+        let mut kids = [(0.0f64, 0usize); 8];
+        let mut n = 0;
+        for c in node.children() {
+            let d2 = self.nodes[c].bbox.dist2_to(q);
+            // Insertion by box distance (ties by child order).
+            let mut at = n;
+            while at > 0 && kids[at - 1].0 > d2 {
+                kids[at] = kids[at - 1];
+                at -= 1;
+            }
+            kids[at] = (d2, c);
+            n += 1;
+        }
+        for &(d2, c) in &kids[..n] {
+            if best.len() == k && best.peek().is_some_and(|w| d2 > w.0.0) {
+                break;
+            }
+            self.nearest_in(c, q, k, best);
+        }
     }
 }
 
