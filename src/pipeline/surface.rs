@@ -229,9 +229,7 @@ fn simplify_to_chord_error(
     }
     let step = mesh.triangles.len().div_ceil(CHORD_SAMPLES).max(1);
     let centroids: Vec<Point3> = (mesh.triangles.iter().step_by(step))
-        .map(|t| {
-            [0, 1, 2].map(|k| t.iter().map(|&v| mesh.vertices[v as usize][k]).sum::<f64>() / 3.0)
-        })
+        .map(|t| crate::mesh::reach::centroid(mesh, t))
         .collect();
     let d = first_order_distances(fit.field.as_ref(), &centroids, CHORD_BUCKET * s.cell_size);
     s.chord_error_max = d.iter().fold(0.0, |a: f64, &b| a.max(b));
