@@ -235,8 +235,32 @@ impl std::fmt::Display for ChordTolerance {
 }
 
 /// `chord-error`: `auto` (the default, [`DEFAULT_CHORD_SPACING`]), `off` or a fraction of the point
-/// spacing (a plain decimal number).
-pub const CHORD_ERROR_PATTERN: &str = "^(auto|off|[0-9]+(\\.[0-9]+)?|\\.[0-9]+)$";
+/// spacing in (0, 2] (a plain decimal number): below 1, from 1 to below 2, or 2. The spellings
+/// [`chord_error_spelled`] accepts.
+pub const CHORD_ERROR_PATTERN: &str =
+    "^(auto|off|0*\\.[0-9]*[1-9][0-9]*|0*1(\\.[0-9]+)?|0*2(\\.0+)?)$";
+
+/// Whether `value` matches [`CHORD_ERROR_PATTERN`] (written out: the API enforces exactly what its
+/// document states).
+pub fn chord_error_spelled(value: &str) -> bool {
+    if value == "auto" || value == "off" {
+        return true;
+    }
+    let (int, frac) = match value.split_once('.') {
+        Some((i, f)) => (i, Some(f)),
+        None => (value, None),
+    };
+    let digits = |s: &str| s.bytes().all(|b| b.is_ascii_digit());
+    if !digits(int) || frac.is_some_and(|f| f.is_empty() || !digits(f)) {
+        return false;
+    }
+    match (int.trim_start_matches('0'), frac) {
+        ("", Some(f)) => f.bytes().any(|b| b != b'0'),
+        ("1", _) => true,
+        ("2", f) => f.is_none_or(|f| f.bytes().all(|b| b == b'0')),
+        _ => false,
+    }
+}
 
 impl Default for ReconParams {
     fn default() -> Self {
@@ -885,5 +909,57 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(p.validate().unwrap_err().expected, "a number in [0, 10]");
+    }
+}
+
+#[cfg(test)]
+mod chord_error_spelling_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn the_pattern_s_spellings_are_the_numbers_in_range() {
+        for ok in [
+            "auto", "off", "0.03", ".5", "00.1", "1", "1.999", "01.5", "2", "2.000",
+        ] {
+            assert!(chord_error_spelled(ok), "{ok}");
+        }
+        for bad in [
+            "",
+            ".",
+            "0",
+            "0.0",
+            "00",
+            "2.01",
+            "3",
+            "10",
+            "1.",
+            ".0",
+            "-1",
+            "1e-2",
+            "0x1",
+            " 1",
+            "5108809357169005659.1513271",
+            "Auto",
+        ] {
+            assert!(!chord_error_spelled(bad), "{bad}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(512))]
+        /// A plain decimal is spelled right exactly when it is a tolerance the parameters accept.
+        #[test]
+        fn spelled_decimals_are_the_valid_tolerances(s in "[0-9]{0,3}(\\.[0-9]{0,4})?") {
+            let decimal = !s.is_empty() && !s.ends_with('.') && s != ".";
+            let valid = decimal
+                && s.parse::<ChordTolerance>().is_ok_and(|c| ReconParams {
+                    chord_error: c,
+                    ..Default::default()
+                }
+                .validate()
+                .is_ok());
+            prop_assert_eq!(chord_error_spelled(&s), valid, "{}", s);
+        }
     }
 }

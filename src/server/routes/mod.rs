@@ -211,14 +211,10 @@ fn check_conflicts(pairs: &[&(String, String)]) -> Result<(), ApiError> {
 /// lenient with case and aliases): choices from [`crate::params::choices`], `blocks` by
 /// [`crate::params::BLOCKS_PATTERN`], `chord-error` by [`crate::params::CHORD_ERROR_PATTERN`].
 fn check_spelling(name: &str, value: &str) -> Result<(), ApiError> {
-    if name == "chord-error" {
-        let decimal =
-            value.parse::<f64>().is_ok() && value.bytes().all(|b| b.is_ascii_digit() || b == b'.');
-        if !(decimal || value == "off" || value == "auto") {
-            return Err(ApiError::bad_parameter(format!(
-                "invalid parameter chord-error = {value}: auto, off or a fraction of the point spacing (a decimal number, e.g. 0.1)"
-            )));
-        }
+    if name == "chord-error" && !crate::params::chord_error_spelled(value) {
+        return Err(ApiError::bad_parameter(format!(
+            "invalid parameter chord-error = {value}: auto, off or a fraction of the point spacing in (0, 2] (a decimal number, e.g. 0.1)"
+        )));
     }
     if name == "blocks" {
         let number = (4..=9).contains(&value.len())
