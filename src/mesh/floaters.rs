@@ -48,39 +48,52 @@ fn support_of(
     points: &[Point3],
     max_distance: f64,
 ) -> ComponentSupport {
-    let mut vertex_label = vec![u32::MAX; mesh.vertices.len()];
-    for (t, &c) in mesh.triangles.iter().zip(&labels) {
-        for &v in t {
-            vertex_label[v as usize] = c;
-        }
-    }
-    let used: Vec<u32> = (0..mesh.vertices.len() as u32)
-        .filter(|&v| vertex_label[v as usize] != u32::MAX)
-        .collect();
-    let positions: Vec<Point3> = used.iter().map(|&v| mesh.vertices[v as usize]).collect();
     let mut support = vec![0usize; triangles.len()];
-    let Ok(tree) = KdTree::build(&positions) else {
-        return ComponentSupport {
-            labels,
-            triangles,
-            points: support,
-        };
-    };
-    let nearest: Vec<u32> = points
-        .par_iter()
-        .map(|p| match tree.nearest_one(p) {
-            Some((i, d)) if d <= max_distance => vertex_label[used[i as usize] as usize],
-            _ => u32::MAX,
-        })
-        .collect();
-    for c in nearest.into_iter().filter(|&c| c != u32::MAX) {
-        support[c as usize] += 1;
+    for c in carriers(mesh, &labels, points, max_distance) {
+        if c != u32::MAX {
+            support[c as usize] += 1;
+        }
     }
     ComponentSupport {
         labels,
         triangles,
         points: support,
     }
+}
+
+/// Per vertex, the component (triangle label `labels`) it belongs to; `u32::MAX` for unused
+/// vertices.
+pub(crate) fn vertex_pieces(mesh: &TriMesh, labels: &[u32]) -> Vec<u32> {
+    let mut piece = vec![u32::MAX; mesh.vertices.len()];
+    for (t, &c) in mesh.triangles.iter().zip(labels) {
+        t.iter().for_each(|&v| piece[v as usize] = c);
+    }
+    piece
+}
+
+/// Per point, the component (triangle label `labels`) carrying it: that of its nearest used mesh
+/// vertex when within `max_distance`, else `u32::MAX` (also for every point when the vertices
+/// cannot be indexed).
+pub(crate) fn carriers(
+    mesh: &TriMesh,
+    labels: &[u32],
+    points: &[Point3],
+    max_distance: f64,
+) -> Vec<u32> {
+    let piece = vertex_pieces(mesh, labels);
+    let used: Vec<u32> = (0..mesh.vertices.len() as u32)
+        .filter(|&v| piece[v as usize] != u32::MAX)
+        .collect();
+    let positions: Vec<Point3> = used.iter().map(|&v| mesh.vertices[v as usize]).collect();
+    let Ok(tree) = KdTree::build(&positions) else {
+        return vec![u32::MAX; points.len()];
+    };
+    (points.par_iter())
+        .map(|p| match tree.nearest_one(p) {
+            Some((i, d)) if d <= max_distance => piece[used[i as usize] as usize],
+            _ => u32::MAX,
+        })
+        .collect()
 }
 
 /// Per triangle: `true` when its component is a floater (see the module doc: carries fewer than

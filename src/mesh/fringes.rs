@@ -79,7 +79,7 @@ pub fn fringes(mesh: &TriMesh, points: &[Point3], radius: f64) -> (Vec<bool>, us
 
 /// Which `shallow` pieces have a vertex within `reach` of a vertex of a piece that is not shallow.
 fn beside_kept(mesh: &TriMesh, labels: &[u32], shallow: &[bool], reach: f64) -> Vec<bool> {
-    let piece = vertex_pieces(mesh, labels);
+    let piece = super::floaters::vertex_pieces(mesh, labels);
     let kept: Vec<Point3> = (0..mesh.vertices.len())
         .filter(|&v| piece[v] != u32::MAX && !shallow[piece[v] as usize])
         .map(|v| mesh.vertices[v])
@@ -113,25 +113,8 @@ fn own_data(
     radius: f64,
 ) -> Vec<usize> {
     use crate::spatial::{IndexKind, build_index};
-    use rayon::prelude::*;
-    let piece = vertex_pieces(mesh, labels);
-    let used: Vec<u32> = (0..mesh.vertices.len() as u32)
-        .filter(|&v| piece[v as usize] != u32::MAX)
-        .collect();
-    let positions: Vec<Point3> = used.iter().map(|&v| mesh.vertices[v as usize]).collect();
-    let Ok(vertices) = build_index(&positions, IndexKind::KdTree, 16) else {
-        return Vec::new();
-    };
     // The piece carrying each point (u32::MAX: none within `radius`).
-    let carrier: Vec<u32> = (points.par_iter())
-        .map_init(Vec::new, |knn, p| {
-            vertices.nearest_k(p, 1, knn);
-            match knn.first() {
-                Some(&(i, d)) if d <= radius => piece[used[i as usize] as usize],
-                _ => u32::MAX,
-            }
-        })
-        .collect();
+    let carrier = super::floaters::carriers(mesh, labels, points, radius);
     let kept: Vec<Point3> = (points.iter().zip(&carrier))
         .filter(|&(_, &c)| c != u32::MAX && !shallow[c as usize])
         .map(|(p, _)| *p)
@@ -154,15 +137,6 @@ fn own_data(
     (0..candidates.len())
         .filter(|&c| candidates[c] && !near[c] && carried[c] >= super::floaters::OWNED_MIN_POINTS)
         .collect()
-}
-
-/// Per vertex, the piece (triangle label) it belongs to; `u32::MAX` for unused vertices.
-fn vertex_pieces(mesh: &TriMesh, labels: &[u32]) -> Vec<u32> {
-    let mut piece = vec![u32::MAX; mesh.vertices.len()];
-    for (t, &c) in mesh.triangles.iter().zip(labels) {
-        t.iter().for_each(|&v| piece[v as usize] = c);
-    }
-    piece
 }
 
 /// Per vertex, the length of the shortest edge path to a border vertex (a vertex of an edge

@@ -62,16 +62,15 @@ fn run_reach(
     threshold: f64,
     near: &mut Vec<u32>,
 ) -> Vec<Reach> {
-    let beyond = |c: &Point3| Reach::Beyond(tree.nearest_one(c));
+    // The k-d tree's answer for one centroid.
+    let by_tree = |x: &Point3| match tree.nearest_one(x) {
+        Some((_, d)) if d <= threshold => Reach::Within,
+        hit => Reach::Beyond(hit),
+    };
     let bbox = Aabb::from_points(centres);
     let (c, h) = (bbox.center(), 0.5 * bbox.diagonal());
     if !(threshold >= 0.0 && h.is_finite() && h <= WIDEST_RUN * threshold.max(f64::MIN_POSITIVE)) {
-        return (centres.iter())
-            .map(|x| match tree.nearest_one(x) {
-                Some((_, d)) if d <= threshold => Reach::Within,
-                hit => Reach::Beyond(hit),
-            })
-            .collect();
+        return centres.iter().map(by_tree).collect();
     }
     tree.within(&c, (threshold + h) * (1.0 + MARGIN), near);
     let mut list: Vec<(f64, Point3)> = (near.iter())
@@ -84,7 +83,7 @@ fn run_reach(
             if list.iter().any(|(_, p)| dist2(*p, *x).sqrt() <= threshold) {
                 Reach::Within
             } else {
-                beyond(x)
+                by_tree(x)
             }
         })
         .collect()
