@@ -22,6 +22,9 @@ import sys
 
 import numpy as np
 
+# Camera distance from the mesh's centre, in bounding-box diagonals.
+DISTANCE = 2.5
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "realscans"))
 from prepare import read_off  # noqa: E402
 
@@ -32,7 +35,7 @@ def camera(v, azimuth, elevation):
     centre, diag = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
     a, e = np.radians(azimuth), np.radians(elevation)
     back = np.array([np.sin(a) * np.cos(e), np.sin(e), np.cos(a) * np.cos(e)])
-    eye = centre + 2.5 * diag * back
+    eye = centre + DISTANCE * diag * back
     fwd = -back
     right = np.cross(fwd, [0.0, 1.0, 0.0])
     right /= np.linalg.norm(right)
@@ -48,7 +51,7 @@ def scan(v, f, a):
     area = 0.5 * np.linalg.norm(normal, axis=1)
     normal /= np.maximum(2 * area, 1e-300)[:, None]
     # The view fits the bounding sphere in 90 % of the image.
-    focal = 0.45 * a.pixels / np.tan(np.arcsin(min(0.5 / 2.5, 0.99)))
+    focal = 0.45 * a.pixels / np.tan(np.arcsin(0.5 / DISTANCE))
     n = 40 * a.pixels * a.pixels
     pick = rng.choice(len(f), size=n, p=area / area.sum())
     r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
@@ -66,9 +69,8 @@ def scan(v, f, a):
     first[1:] = pix_sorted[1:] != pix_sorted[:-1]
     front = order[first & (pix_sorted >= 0)]
     ray = d[front] / np.linalg.norm(d[front], axis=1)[:, None]
-    facing = np.abs(np.sum(ray * normal[pick[front]], axis=1))
-    front = front[facing >= np.cos(np.radians(a.grazing))]
-    ray = d[front] / np.linalg.norm(d[front], axis=1)[:, None]
+    seen = np.abs(np.sum(ray * normal[pick[front]], axis=1)) >= np.cos(np.radians(a.grazing))
+    front, ray = front[seen], ray[seen]
     points = p[front] + ray * rng.normal(0.0, a.noise * diag, size=len(front))[:, None]
     return points, pix[front]
 
